@@ -1,0 +1,81 @@
+"""Counter-based random numbers as ``ti.func`` (Taichi side).
+
+A variate is a pure function of the key (seed, frame, stream, index), so results do
+not depend on the thread count, the launch order or the backend.  ``ti.random`` keeps
+per-thread state and is not reproducible on a multi-threaded CPU.
+
+The hash is a chain of Wellons' ``lowbias32`` integer mixers (bijective on u32), one
+round per key word plus a final round; only 32-bit unsigned operations are used, so
+every backend (CPU, CUDA, Vulkan, Metal) gives the same bits.  The NumPy twin is
+``tbd_taichi.numpy_kernels.rng``.
+"""
+import taichi as ti
+
+GOLDEN = 0x9E3779B9
+MIX1 = 0x7FEB352D
+MIX2 = 0x846CA68B
+TWO_PI = 6.283185307179586
+INV_2_24 = 1.0 / 16777216.0
+
+
+@ti.func
+def lowbias32(x: ti.u32) -> ti.u32:
+    """Wellons' lowbias32 integer mixer (bijective on 32-bit words)."""
+    x ^= x >> 16
+    x *= ti.u32(MIX1)
+    x ^= x >> 15
+    x *= ti.u32(MIX2)
+    x ^= x >> 16
+    return x
+
+
+@ti.func
+def hash_key(seed, frame, stream, index) -> ti.u32:
+    """32-bit hash of the key (seed, frame, stream, index); any integer types."""
+    h = lowbias32(ti.cast(seed, ti.u32) ^ ti.u32(GOLDEN))
+    h = lowbias32(h ^ ti.cast(frame, ti.u32))
+    h = lowbias32(h ^ ti.cast(stream, ti.u32))
+    h = lowbias32(h ^ ti.cast(index, ti.u32))
+    return lowbias32(h + ti.u32(GOLDEN))
+
+
+@ti.func
+def unit_from_bits(h: ti.u32) -> ti.f32:
+    """Map 32 random bits to the open interval (0, 1): (2·(h>>9)+1)·2^-24, exact in f32."""
+    return ti.cast((h >> 9) * ti.u32(2) + ti.u32(1), ti.f32) * ti.f32(INV_2_24)
+
+
+@ti.func
+def uniform(seed, frame, stream, index) -> ti.f32:
+    """U(0, 1) variate for the key, never exactly 0 or 1."""
+    return unit_from_bits(hash_key(seed, frame, stream, index))
+
+
+@ti.func
+def normal(seed, frame, stream, index) -> ti.f32:
+    """N(0, 1) variate for the key (Box–Muller on two hashes of the key, f32)."""
+    h = hash_key(seed, frame, stream, index)
+    u1 = unit_from_bits(h)
+    u2 = unit_from_bits(lowbias32(h + ti.u32(GOLDEN)))
+    return ti.sqrt(ti.f32(-2.0) * ti.log(u1)) * ti.cos(ti.f32(TWO_PI) * u2)
+
+
+@ti.kernel
+def fill_hash(out: ti.types.ndarray(dtype=ti.u32, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
+    """out[i] = hash_key(seed, frame, stream, offset + i)."""
+    for i in range(out.shape[0]):
+        out[i] = hash_key(seed, frame, stream, offset + ti.cast(i, ti.u32))
+
+
+@ti.kernel
+def fill_uniform(out: ti.types.ndarray(dtype=ti.f32, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
+    """out[i] = uniform(seed, frame, stream, offset + i)."""
+    for i in range(out.shape[0]):
+        out[i] = uniform(seed, frame, stream, offset + ti.cast(i, ti.u32))
+
+
+@ti.kernel
+def fill_normal(out: ti.types.ndarray(dtype=ti.f32, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
+    """out[i] = normal(seed, frame, stream, offset + i)."""
+    for i in range(out.shape[0]):
+        out[i] = normal(seed, frame, stream, offset + ti.cast(i, ti.u32))

@@ -1,0 +1,123 @@
+"""Taichi backend selection: ``init(arch, threads, debug)``.
+
+Every Taichi kernel in ``tbd_taichi.kernels`` runs on the runtime that
+:func:`init` starts.  The default is the CPU; ``"gpu"`` picks the first GPU
+backend that is present and ``"auto"`` falls back to the CPU silently.  Any
+other backend that is not there is an error that lists what is available.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+from dataclasses import dataclass
+
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
+
+import taichi as ti  # noqa: E402
+
+from .errors import BackendError  # noqa: E402
+
+ARCH_NAMES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
+GPU_ARCHS = ("cuda", "vulkan", "metal")
+
+
+@dataclass(frozen=True)
+class BackendConfig:
+    """The settings of the running Taichi runtime."""
+
+    arch: str
+    threads: int | None
+    debug: bool
+
+
+_current: BackendConfig | None = None
+_generation = 0
+
+
+def _ti_arch(name: str):
+    return {"cpu": ti.cpu, "cuda": ti.cuda, "vulkan": ti.vulkan, "metal": ti.metal}[name]
+
+
+def _probe(name: str) -> bool:
+    from taichi.lang.misc import is_arch_supported
+
+    if name == "cpu":
+        return True
+    ti.set_logging_level(ti.ERROR)  # silence "libcuda.so not found" while probing
+    try:
+        return bool(is_arch_supported(_ti_arch(name)))
+    except Exception:  # a broken driver counts as absent
+        return False
+    finally:
+        ti.set_logging_level(ti.WARN)
+
+
+def available_archs() -> list[str]:
+    """Backends this machine can run, CPU first."""
+    return ["cpu"] + [name for name in GPU_ARCHS if _probe(name)]
+
+
+def _resolve(arch: str) -> str:
+    if arch not in ARCH_NAMES:
+        raise BackendError(f"unknown arch {arch!r}; choose one of {', '.join(ARCH_NAMES)}")
+    if arch in ("gpu", "auto"):
+        gpus = [name for name in GPU_ARCHS if _probe(name)]
+        if gpus:
+            return gpus[0]
+        if arch == "auto":
+            return "cpu"
+        raise BackendError(f"arch 'gpu' requested but no GPU backend is available; available: {', '.join(available_archs())}")
+    if not _probe(arch):
+        raise BackendError(f"arch {arch!r} is not available on this machine; available: {', '.join(available_archs())}")
+    return arch
+
+
+def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> BackendConfig:
+    """Start (or keep) the Taichi runtime on ``arch``.
+
+    ``threads`` caps the CPU worker threads (None: all cores).  Calling ``init``
+    again with the same settings does nothing; other settings restart the runtime,
+    after which fields made before belong to the old runtime and are rebuilt by
+    their owners (see :func:`generation`).  The offline cache is on, so a second
+    process does not recompile the kernels.
+    """
+    global _current, _generation
+    if threads is not None and (not isinstance(threads, int) or threads < 1):
+        raise BackendError(f"threads must be a positive integer or None, got {threads!r}")
+    name = _resolve(arch)
+    wanted = BackendConfig(name, threads, bool(debug))
+    if wanted == _current:
+        return _current
+    if _current is not None:
+        ti.reset()
+    kwargs = dict(arch=_ti_arch(name), debug=bool(debug), offline_cache=True,
+                  log_level=ti.WARN, enable_fallback=False, default_fp=ti.f32, default_ip=ti.i32)
+    if threads is not None:
+        kwargs["cpu_max_num_threads"] = threads
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # drop "[Taichi] Starting on arch=..."
+            ti.init(**kwargs)
+    except Exception as exc:  # pragma: no cover - depends on drivers
+        _current = None
+        raise BackendError(f"could not start Taichi on {name!r}: {exc}; available: {', '.join(available_archs())}") from exc
+    _current = wanted
+    _generation += 1
+    return _current
+
+
+def ensure_init(arch: str | None = None) -> BackendConfig:
+    """Initialise on ``arch`` if given; otherwise keep the running runtime, or start the CPU one."""
+    if arch is not None:
+        return init(arch) if _current is None or _resolve(arch) != _current.arch else _current
+    return _current if _current is not None else init("cpu")
+
+
+def current() -> BackendConfig | None:
+    """Settings of the running runtime, or None before :func:`init`."""
+    return _current
+
+
+def generation() -> int:
+    """Counter bumped by every (re)start of the runtime; owners of fields compare it."""
+    return _generation

@@ -1,0 +1,215 @@
+"""Frame input: ``.npy``, ``.npz``, video files and image folders, as float32 frames.
+
+Two ways in:
+
+* :func:`read_frames` loads a whole sequence as a float32 array (T, H, W);
+* :func:`iter_frames` streams it one float32 (H, W) frame at a time, so a long
+  video or a memory-mapped ``.npy`` is never loaded whole.
+
+Frames keep their raw values (8-bit, 14-bit or float); normalisation to unit
+noise is :mod:`tbd_taichi.normalize`'s job.  Colour images and videos are
+converted to grey with OpenCV.  Every bad input raises :class:`InputError` with
+the path and the problem.
+"""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg", ".webm")
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp")
+ARRAY_SUFFIXES = (".npy", ".npz")
+SUPPORTED = "a .npy or .npz file (array 'frames'), a video (" + ", ".join(VIDEO_SUFFIXES) + \
+    ") or a folder of " + "/".join(s.lstrip(".").upper() for s in IMAGE_SUFFIXES) + " images"
+
+
+@dataclass
+class FrameSource:
+    """A sequence that can be streamed: its name, frame shape (H, W) and length.
+
+    ``n_frames`` is exact for arrays and folders; for videos it is the container's
+    own count, which some codecs only estimate (None when unknown).
+    """
+
+    name: str
+    shape: tuple[int, int]
+    n_frames: int | None
+    _open: Callable[[], Iterator[np.ndarray]]
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        for index, frame in enumerate(self._open()):
+            yield checked_frame(frame, self.name, index, self.shape)
+
+
+def natural_key(name: str) -> list:
+    """Sort key that orders 'f2.png' before 'f10.png'."""
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+
+
+def to_grey(image: np.ndarray, where: str) -> np.ndarray:
+    """(H, W) grey image from a grey, BGR or BGRA image (OpenCV channel order)."""
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+        if image.dtype not in (np.uint8, np.uint16, np.float32):
+            image = image.astype(np.float32)
+        return cv2.cvtColor(image, code)
+    if image.ndim == 3 and image.shape[2] == 1:
+        return image[:, :, 0]
+    raise InputError(f"{where}: image has shape {image.shape}; expected (H, W) grey or (H, W, 3|4) colour")
+
+
+def _check_dtype(dtype: np.dtype, where: str) -> None:
+    if dtype.kind not in "biuf":
+        raise InputError(f"{where}: dtype {dtype} is not a real number type; expected an integer or float array")
+
+
+def checked_frame(frame: np.ndarray, where: str, index: int, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """One frame as C-contiguous float32 (H, W); rejects other shapes and NaN/inf."""
+    frame = np.asarray(frame)
+    _check_dtype(frame.dtype, where)
+    if frame.ndim != 2:
+        raise InputError(f"{where}: frame {index} has {frame.ndim} dimensions {frame.shape}; expected a 2-D (H, W) frame")
+    if shape is not None and frame.shape != tuple(shape):
+        raise InputError(f"{where}: frame {index} has size {frame.shape[0]}x{frame.shape[1]} (HxW); "
+                         f"expected {shape[0]}x{shape[1]} like the first frame")
+    out = np.ascontiguousarray(frame, dtype=np.float32)
+    if not np.isfinite(out).all():
+        bad = "NaN" if np.isnan(out).any() else "inf"
+        raise InputError(f"{where}: frame {index} contains {bad} values")
+    return out
+
+
+def _array_source(array: np.ndarray, name: str) -> FrameSource:
+    _check_dtype(array.dtype, name)
+    if array.ndim != 3:
+        raise InputError(f"{name}: array has {array.ndim} dimensions {array.shape}; expected 3 dimensions (T, H, W)")
+    if array.shape[1] < 1 or array.shape[2] < 1:
+        raise InputError(f"{name}: frames of size {array.shape[1]}x{array.shape[2]} are empty")
+    return FrameSource(name, (int(array.shape[1]), int(array.shape[2])), int(array.shape[0]), lambda: iter(array))
+
+
+def _load_array(path: Path) -> np.ndarray:
+    try:
+        if path.suffix.lower() == ".npy":
+            return np.load(path, mmap_mode="r", allow_pickle=False)
+        with np.load(path, allow_pickle=False) as archive:
+            if "frames" not in archive.files:
+                raise InputError(f"{path}: .npz file has no array 'frames' (it has: {', '.join(archive.files) or 'nothing'})")
+            return archive["frames"]
+    except InputError:
+        raise
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(f"{path}: not a readable {path.suffix} file ({exc})") from exc
+
+
+def _video_source(path: Path) -> FrameSource:
+    capture = cv2.VideoCapture(str(path))
+    ok, first = capture.read() if capture.isOpened() else (False, None)
+    count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if ok else 0
+    capture.release()
+    if not ok or first is None:
+        raise InputError(f"{path}: unreadable video (OpenCV could not decode a frame)")
+    shape = to_grey(first, str(path)).shape
+
+    def frames() -> Iterator[np.ndarray]:
+        cap = cv2.VideoCapture(str(path))
+        try:
+            while True:
+                ok, image = cap.read()
+                if not ok:
+                    return
+                yield to_grey(image, str(path))
+        finally:
+            cap.release()
+
+    return FrameSource(str(path), shape, count if count > 0 else None, frames)
+
+
+def _read_image(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise InputError(f"{path}: unreadable image")
+    return to_grey(image, str(path))
+
+
+def _folder_source(path: Path) -> FrameSource:
+    files = sorted((p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+                   key=lambda p: natural_key(p.name))
+    if not files:
+        raise InputError(f"{path}: folder holds no {'/'.join(IMAGE_SUFFIXES)} images")
+    shape = _read_image(files[0]).shape
+
+    def frames() -> Iterator[np.ndarray]:
+        for index, file in enumerate(files):
+            image = _read_image(file)
+            if image.shape != shape:
+                raise InputError(f"{file}: image {index} has size {image.shape[0]}x{image.shape[1]} (HxW); "
+                                 f"expected {shape[0]}x{shape[1]} like {files[0].name}; images of mixed sizes")
+            yield image
+
+    return FrameSource(str(path), shape, len(files), frames)
+
+
+def open_frames(source) -> FrameSource:
+    """A streaming :class:`FrameSource` for a path (file or folder) or an array (T, H, W)."""
+    if isinstance(source, FrameSource):
+        return source
+    if isinstance(source, np.ndarray):
+        return _array_source(source, "input array")
+    if not isinstance(source, (str, os.PathLike)):
+        raise InputError(f"input of type {type(source).__name__} is not a path or an array (T, H, W)")
+    path = Path(source)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or folder")
+    if path.is_dir():
+        return _folder_source(path)
+    suffix = path.suffix.lower()
+    if suffix not in ARRAY_SUFFIXES + VIDEO_SUFFIXES + IMAGE_SUFFIXES:
+        raise InputError(f"{path}: unknown file type {suffix or '(no suffix)'!r}; expected {SUPPORTED}")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: file is empty")
+    if suffix in ARRAY_SUFFIXES:
+        return _array_source(_load_array(path), str(path))
+    if suffix in VIDEO_SUFFIXES:
+        return _video_source(path)
+    raise InputError(f"{path}: a single image is one frame; pass the folder that holds the sequence")
+
+
+def _too_few(name: str, n: int, min_frames: int) -> InputError:
+    return InputError(f"{name}: {n} frame(s), but at least {min_frames} are needed")
+
+
+def iter_frames(source, min_frames: int = 1) -> Iterator[np.ndarray]:
+    """Stream float32 (H, W) frames from ``source`` (see :func:`open_frames`).
+
+    Raises :class:`InputError` before the first frame when the length is known to be
+    short, otherwise when the stream ends short.
+    """
+    src = open_frames(source)
+    if src.n_frames is not None and src.n_frames < min_frames and not src.name.endswith(VIDEO_SUFFIXES):
+        raise _too_few(src.name, src.n_frames, min_frames)
+    count = 0
+    for frame in src:
+        count += 1
+        yield frame
+    if count < min_frames:
+        raise _too_few(src.name, count, min_frames)
+
+
+def read_frames(source, min_frames: int = 1) -> np.ndarray:
+    """Load a whole sequence as float32 (T, H, W); see :func:`open_frames` for the inputs."""
+    src = open_frames(source)
+    frames = list(iter_frames(src, min_frames))
+    if not frames:
+        raise _too_few(src.name, 0, max(min_frames, 1))
+    return np.stack(frames)

@@ -1,0 +1,1 @@
+"""NumPy twins of ``tbd_taichi.kernels``: same contracts, vectorised NumPy."""

@@ -1,0 +1,83 @@
+"""Track and truth tables: structured NumPy arrays and their CSV files.
+
+Coordinates everywhere: x = column, y = row, 0-based, pixel centres at integers;
+``frame`` is the 0-based index into the input sequence.
+
+* tracks: ``frame,track_id,x,y,vx,vy,intensity,confidence`` — one row per
+  confirmed track per frame;
+* truth: ``frame,target_id,x,y,vx,vy,intensity`` — one row per target per frame
+  in which it is in view.
+"""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+TRACK_COLUMNS = ("frame", "track_id", "x", "y", "vx", "vy", "intensity", "confidence")
+TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
+
+
+def _dtype(columns: tuple[str, ...]) -> np.dtype:
+    return np.dtype([(c, np.int64 if c in ("frame", "track_id", "target_id") else np.float64) for c in columns])
+
+
+TRACK_DTYPE = _dtype(TRACK_COLUMNS)
+TRUTH_DTYPE = _dtype(TRUTH_COLUMNS)
+
+
+def empty_tracks() -> np.ndarray:
+    """A tracks table with no rows."""
+    return np.zeros(0, dtype=TRACK_DTYPE)
+
+
+def make_table(rows, dtype: np.dtype) -> np.ndarray:
+    """Structured array from an iterable of tuples in column order, sorted by (frame, id)."""
+    table = np.array([tuple(r) for r in rows], dtype=dtype)
+    return np.sort(table, order=list(dtype.names[:2]))
+
+
+def write_csv(table: np.ndarray, path) -> None:
+    """Write a tracks or truth table with its header; floats with 4 decimals."""
+    names = table.dtype.names
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(names)
+        for row in table:
+            writer.writerow([int(row[n]) if table.dtype[n].kind == "i" else f"{float(row[n]):.4f}" for n in names])
+
+
+def read_csv(path, columns: tuple[str, ...]) -> np.ndarray:
+    """Read a CSV with (at least) ``columns``, in any order; raises InputError naming the problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    with open(path, newline="") as handle:
+        reader = csv.DictReader(handle)
+        header = reader.fieldnames or []
+        missing = [c for c in columns if c not in header]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {', '.join(missing)}; expected header {','.join(columns)}")
+        rows = []
+        for line, record in enumerate(reader, start=2):
+            try:
+                rows.append(tuple(float(record[c]) for c in columns))
+            except (TypeError, ValueError):
+                raise InputError(f"{path}: line {line} has a value that is not a number") from None
+    table = make_table(rows, _dtype(columns))
+    if len(table) and not np.isfinite(np.stack([table[c] for c in columns]).astype(float)).all():
+        raise InputError(f"{path}: NaN or inf values")
+    return table
+
+
+def read_tracks(path) -> np.ndarray:
+    """Tracks CSV ``frame,track_id,x,y,vx,vy,intensity,confidence``."""
+    return read_csv(path, TRACK_COLUMNS)
+
+
+def read_truth(path) -> np.ndarray:
+    """Truth CSV ``frame,target_id,x,y,vx,vy,intensity``."""
+    return read_csv(path, TRUTH_COLUMNS)
