@@ -35,6 +35,9 @@ def test_wheel_has_no_top_level_kernels(wheel):
     names = zipfile.ZipFile(wheel).namelist()
     assert "tbd_taichi/kernels/__init__.py" in names and "tbd_taichi/kernels/rng.py" in names
     assert not [n for n in names if n.startswith("kernels/")]
+    sources = {f"tbd_taichi/{p.relative_to(ROOT / 'tbd_taichi').as_posix()}" for p in (ROOT / "tbd_taichi").rglob("*.py")}
+    sources |= {f"tbd_taichi/kernels/{p.relative_to(ROOT / 'kernels').as_posix()}" for p in (ROOT / "kernels").rglob("*.py")}
+    assert sources <= set(names), f"missing from the wheel: {sorted(sources - set(names))}"
     for name in (n for n in names if n.endswith("top_level.txt")):
         assert zipfile.ZipFile(wheel).read(name).decode().split() == ["tbd_taichi"]
 
