@@ -92,7 +92,8 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
     if _current is not None:
         ti.reset()
     kwargs = dict(arch=_ti_arch(name), debug=bool(debug), offline_cache=True,
-                  log_level=ti.WARN, enable_fallback=False, default_fp=ti.f32, default_ip=ti.i32)
+                  log_level=ti.WARN, enable_fallback=False, default_fp=ti.f32, default_ip=ti.i32,
+                  fast_math=False)  # IEEE f32: the NumPy twins reproduce the same bits
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     try:

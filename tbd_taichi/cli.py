@@ -63,6 +63,18 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from .bench import format_table, run_bench
+
+    engines = [e.strip() for e in args.engines.split(",") if e.strip()]
+    unknown = [e for e in engines if e not in ("taichi", "numpy")]
+    if unknown or not engines:
+        raise TBDError(f"--engines takes a comma list of taichi,numpy; got {args.engines!r}")
+    result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch)
+    print(json.dumps(result) if args.json else format_table(result))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tbd-taichi", description=(
         "Track-before-detect of dim infrared point targets with Taichi particle filters. "
@@ -95,12 +107,26 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", action="store_true", help="print one JSON object (keys dsr, edt_mean, false_tracks, ospa)")
     _common(ev)
     ev.set_defaults(func=cmd_evaluate)
+
+    be = sub.add_parser("bench", help="time each stage, Taichi against NumPy",
+                        description="Median milliseconds per frame for each stage after a warm-up, for each engine "
+                                    "in the same run, on a simulated sequence.")
+    be.add_argument("--shape", type=int, nargs=2, metavar=("H", "W"), default=[256, 320],
+                    help="frame height and width, px (default 256 320)")
+    be.add_argument("--snr", type=float, default=1.4, help="SNR preset: the lowest SNR to detect (default 1.4)")
+    be.add_argument("--frames", type=int, default=20, help="timed frames per engine (default 20)")
+    be.add_argument("--engines", default="taichi,numpy", help="comma list of engines (default taichi,numpy)")
+    be.add_argument("--json", action="store_true", help="print one JSON object as the last line")
+    _common(be)
+    be.set_defaults(func=cmd_bench)
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "frames", 1) is not None and getattr(args, "frames", 1) < 1:
+        parser.error("--frames must be ≥ 1")
     try:
         backend.init(args.arch, threads=args.threads)
         return args.func(args)

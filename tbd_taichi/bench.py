@@ -1,0 +1,83 @@
+"""``tbd-taichi bench``: median ms/frame per stage, Taichi against NumPy in the same run.
+
+Stages (each timed per frame after a warm-up, median over the timed frames):
+
+* ``normalise``: z = (frame − median)/(1.4826·MAD) on the host;
+* ``saliency``: the whole multi-frame saliency stage (Eqs. 20–33), from z to the
+  per-block proposal map, one :meth:`SaliencyExtractor.push` per frame.
+
+``total`` is the sum of the stage medians.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import backend
+from .normalize import normalise_frame
+from .saliency import SaliencyExtractor
+from .simulate import simulate
+
+WARMUP = 3
+
+
+def block_size_for_snr(snr: float) -> int:
+    """L_ib from Table 2 by the lowest SNR to detect (point values inside the paper's ranges)."""
+    for lower, size in ((2.0, 256), (1.8, 256), (1.6, 200), (1.4, 150)):
+        if snr >= lower:
+            return size
+    return 100
+
+
+def _median_ms(samples: list[float]) -> float:
+    return float(np.median(samples) * 1e3)
+
+
+def bench_engine(frames: np.ndarray, snr: float, engine: str) -> dict:
+    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
+    ext = SaliencyExtractor(frames.shape[1:], snr=snr, block_size=block_size_for_snr(snr), engine=engine,
+                             details=False)
+    stages: dict[str, list[float]] = {"normalise": [], "saliency": []}
+    for t, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        z = normalise_frame(frame).z
+        t1 = time.perf_counter()
+        ext.push(z)
+        t2 = time.perf_counter()
+        if t >= WARMUP:
+            stages["normalise"].append(t1 - t0)
+            stages["saliency"].append(t2 - t1)
+    medians = {name: _median_ms(v) for name, v in stages.items()}
+    return {"stages": medians, "total": float(sum(medians.values()))}
+
+
+def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
+              seed: int = 0) -> dict:
+    """Benchmark every engine on the same simulated sequence; returns the JSON-ready result."""
+    cfg = backend.init(arch)
+    frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
+    result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
+              "engines": {}}
+    for engine in engines:
+        result["engines"][engine] = bench_engine(frames, snr, engine)
+    return result
+
+
+def format_table(result: dict) -> str:
+    """A readable table with the Taichi/NumPy speed ratio per stage."""
+    engines = result["engines"]
+    stages = list(next(iter(engines.values()))["stages"]) + ["total"]
+    names = list(engines)
+    head = f"{'stage':<12}" + "".join(f"{n + ' ms':>14}" for n in names)
+    ratio = "taichi" in engines and "numpy" in engines
+    head += f"{'numpy/taichi':>14}" if ratio else ""
+    lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
+             f"{result['frames']} timed frames, arch {result['arch']}", head]
+    for stage in stages:
+        vals = {n: (engines[n]["total"] if stage == "total" else engines[n]["stages"][stage]) for n in names}
+        row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)
+        if ratio:
+            row += f"{vals['numpy'] / vals['taichi']:>13.1f}x"
+        lines.append(row)
+    return "\n".join(lines)

@@ -1,0 +1,116 @@
+"""NumPy twin of ``tbd_taichi.kernels.saliency``: same contracts, same f32 operation order.
+
+Border rule: out-of-image pixels are ignored by max filters and count 0 in sums.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+F32 = np.float32
+
+
+def _shifted(padded: np.ndarray, pad: int, dy: int, dx: int, shape) -> np.ndarray:
+    h, w = shape
+    return padded[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+
+
+def energy_collection(z: np.ndarray, r: int = 1) -> np.ndarray:
+    """Eqs. 20–21 on p = max(z, 0): p·Σ p / max p over the (2r+1)² window; 0 where max p = 0."""
+    p = np.maximum(z.astype(F32), F32(0))
+    padded = np.pad(p, r)
+    total = np.zeros_like(p)
+    peak = np.zeros_like(p)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            v = _shifted(padded, r, dy, dx, p.shape)
+            total = total + v
+            peak = np.maximum(peak, v)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(peak > 0, p * total / peak, F32(0)).astype(F32)
+
+
+def max_filter(src: np.ndarray, r: int = 1) -> np.ndarray:
+    """(2r+1)² maximum over in-image neighbours (separable; max is exact in any order)."""
+    padded = np.pad(src.astype(F32), r, constant_values=-np.inf)
+    h, w = src.shape
+    rows = padded[:, 0:w].copy()
+    for dx in range(1, 2 * r + 1):
+        rows = np.maximum(rows, padded[:, dx:dx + w])
+    out = rows[0:h].copy()
+    for dy in range(1, 2 * r + 1):
+        out = np.maximum(out, rows[dy:dy + h])
+    return out
+
+
+def sum_frames(a, b, c, scale: float) -> np.ndarray:
+    """Eq. 22: ((a + b) + c)·scale, with None for a missing frame."""
+    present = [v for v in (a, b, c) if v is not None]
+    total = np.zeros_like(present[0], dtype=F32)
+    for v in present:
+        total = total + v
+    return total * F32(scale)
+
+
+def row_moments(src: np.ndarray) -> np.ndarray:
+    """(H, 2) f64: per-row Σ v and Σ v²."""
+    v = src.astype(np.float64)
+    return np.stack([v.sum(axis=1), (v * v).sum(axis=1)], axis=1)
+
+
+def correlate_d(z: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """z ⋆ D (5×5, zero padding), summed in the kernel's row-major order."""
+    padded = np.pad(z.astype(F32), 2)
+    acc = np.zeros(z.shape, F32)
+    for dy in range(5):
+        for dx in range(5):
+            acc = acc + F32(d[dy, dx]) * _shifted(padded, 2, dy - 2, dx - 2, z.shape)
+    return acc
+
+
+def lef_log_weight(b: np.ndarray, a: float, i_min: float, i_max: float) -> np.ndarray:
+    """Eqs. 27–28: −A·I_c² + B·I_c with I_c = clamp(B/(2A), i_min, i_max)."""
+    a, i_min, i_max = F32(a), F32(i_min), F32(i_max)
+    ic = np.minimum(np.maximum(b / (F32(2.0) * a), i_min), i_max)
+    return (b * ic - a * (ic * ic)).astype(F32)
+
+
+def lef_map(z: np.ndarray, d: np.ndarray, inv_var: float, a: float, i_min: float, i_max: float) -> np.ndarray:
+    """log ω̌_lef at every pixel (Eqs. 25–28)."""
+    return lef_log_weight(correlate_d(z, d) * F32(inv_var), a, i_min, i_max)
+
+
+def segment(acc2: np.ndarray, threshold: float, acc: np.ndarray, acc_max: np.ndarray) -> np.ndarray:
+    """Eq. 24: I_rt = [I_acc2 > T_acc2] ∧ [I_acc == I_acc_max] (bool)."""
+    return (acc2.astype(np.float64) > threshold) & (acc == acc_max)
+
+
+def block_proposal(mask: np.ndarray, logw: np.ndarray, block_id: np.ndarray, n_blocks: int) -> dict:
+    """Eqs. 29–33 for all blocks at once.
+
+    Returns the proposal map (H, W) f32 (each non-empty block sums to 1), the kept mask,
+    and per block: N_eff, the rank k, the candidate count nnz.
+    """
+    idx = np.flatnonzero(mask)
+    b = block_id.ravel()[idx]
+    lw = logw.ravel()[idx].astype(F32)
+    bmax = np.full(n_blocks, -np.inf, F32)
+    np.maximum.at(bmax, b, lw)
+    sal = np.exp(lw - bmax[b]).astype(F32)
+    s1 = np.bincount(b, sal.astype(np.float64), minlength=n_blocks)
+    s2 = np.bincount(b, sal.astype(np.float64) ** 2, minlength=n_blocks)
+    nnz = np.bincount(b, minlength=n_blocks)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        neff = np.where(nnz > 0, s1 * s1 / s2, 0.0)
+    k = np.minimum(np.maximum(np.floor(neff + 0.5).astype(np.int64), 1), nnz)
+    order = np.lexsort((-lw, b))  # by block, then descending log Sal
+    start = np.cumsum(nnz) - nnz
+    kth = np.full(n_blocks, np.inf, F32)
+    has = nnz > 0
+    kth[has] = lw[order][start[has] + k[has] - 1]
+    keep = lw >= kth[b]
+    op = np.bincount(b[keep], sal[keep].astype(np.float64), minlength=n_blocks)
+    proposal = np.zeros(mask.shape, F32)
+    proposal.ravel()[idx[keep]] = (sal[keep].astype(np.float64) / op[b[keep]]).astype(F32)
+    kept = np.zeros(mask.shape, bool)
+    kept.ravel()[idx[keep]] = True
+    return {"proposal": proposal, "kept": kept, "n_eff": neff, "k": k, "nnz": nnz}

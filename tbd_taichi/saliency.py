@@ -1,0 +1,303 @@
+"""Multi-frame saliency extraction (SGDS-PF section 2.2.1, Eqs. 20–33): the scheduler.
+
+From normalised frames z (zero-mean, unit-variance noise) to a normalised proposal
+map per image block, streamed frame by frame with ring buffers so each frame's work
+is done once:
+
+1. I_se(f): 3×3 energy collection on max(z, 0) (Eqs. 20–21), then I_se_max(f).
+2. I_acc(f) = I_se_max(f−1) + I_se_max(f) + I_se_max(f+1), then I_acc_max(f) (Eq. 22).
+3. I_acc2(f) = I_acc_max(f−1) + I_acc_max(f) + I_acc_max(f+1) (Eq. 22, second layer).
+4. T_acc2 = std2(I_acc2)·(2.2·snr − 2) + mean(I_acc2) over the whole image, std2 with
+   the N−1 denominator as in MATLAB (Eq. 23); I_rt = [I_acc2 > T] ∧ [I_acc == I_acc_max] (Eq. 24).
+5. log ω̌_lef at I_rt pixels: the likelihood estimation filter (Eqs. 25–28), with the
+   intensity range of Eq. 26 from the frame's own mean and std, lower bound clamped ≥ 0.
+6. Per block of side ≤ L_ib: Sal = exp(log ω̌ − block max) (Eq. 29, scale-free),
+   N_eff (Eq. 30), keep Sal ≥ the k-th largest, k = clamp(round(N_eff), 1, nnz)
+   (Eqs. 31–32), and normalise to sum 1 (Eq. 33).
+
+Latency: the output for frame f needs frame f+2 (I_acc2(f) needs I_acc_max(f+1), which
+needs I_se_max(f+2)), so :meth:`SaliencyExtractor.push` of frame t returns frame t−2.
+Temporal borders: where f−1 or f+1 is outside the sequence, the 3-frame sums use the
+frames that exist, scaled by 3/n so their level matches the interior (frames 0 and
+T−1 of each layer); :meth:`SaliencyExtractor.flush` emits the last two frames.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import backend
+from .errors import InputError, ParameterError
+from .numpy_kernels import saliency as nps
+
+ENGINES = ("taichi", "numpy")
+
+
+@dataclass
+class BlockGrid:
+    """Image blocks: ceil(W/L)×ceil(H/L) near-equal tiles with edges at ⌊k·W/n⌋ (Eq. 30 context)."""
+
+    block_id: np.ndarray  # (H, W) int32, row-major block index by·n_bx + bx
+    n_by: int
+    n_bx: int
+    offsets: np.ndarray  # (B,) int32 start of each block's slab (cumulative areas)
+    areas: np.ndarray  # (B,) int32 pixels per block
+
+    @property
+    def n_blocks(self) -> int:
+        return self.n_by * self.n_bx
+
+
+def block_grid(shape, block_size: int) -> BlockGrid:
+    """Split (H, W) into ceil(H/L)·ceil(W/L) blocks of side ≤ L."""
+    h, w = shape
+    if block_size < 1:
+        raise ParameterError(f"block size L_ib must be ≥ 1, got {block_size}")
+    n_by, n_bx = math.ceil(h / block_size), math.ceil(w / block_size)
+    row_block = np.searchsorted(np.floor(np.arange(1, n_by) * h / n_by), np.arange(h), side="right")
+    col_block = np.searchsorted(np.floor(np.arange(1, n_bx) * w / n_bx), np.arange(w), side="right")
+    block_id = (row_block[:, None] * n_bx + col_block[None, :]).astype(np.int32)
+    areas = np.bincount(block_id.ravel(), minlength=n_by * n_bx).astype(np.int32)
+    offsets = (np.cumsum(areas) - areas).astype(np.int32)
+    return BlockGrid(block_id, n_by, n_bx, offsets, areas)
+
+
+def psf_matrix(psf_sigma: float = 0.7) -> np.ndarray:
+    """D of Eq. 25: exp(−(Δi² + Δj²)/(2Σ²))/(2πΣ²) on the 5×5 grid (float32)."""
+    d = np.arange(-2, 3)
+    r2 = d[:, None] ** 2 + d[None, :] ** 2
+    return (np.exp(-r2 / (2 * psf_sigma ** 2)) / (2 * math.pi * psf_sigma ** 2)).astype(np.float32)
+
+
+def moments_to_mean_std(rows: np.ndarray, count: int) -> tuple[float, float]:
+    """Mean and N−1 standard deviation (MATLAB std2) from per-row (Σ v, Σ v²)."""
+    s1, s2 = float(rows[:, 0].sum()), float(rows[:, 1].sum())
+    mean = s1 / count
+    var = max(s2 - s1 * mean, 0.0) / max(count - 1, 1)
+    return mean, math.sqrt(var)
+
+
+def segmentation_threshold(mean: float, std: float, snr: float) -> float:
+    """Eq. 23: T_acc2 = std2(I_acc2)·(2.2·snr − 2) + mean(I_acc2)."""
+    return std * (2.2 * snr - 2.0) + mean
+
+
+def intensity_range(mean: float, std: float, snr: float) -> tuple[float, float]:
+    """Eq. 26: [mean + (snr − 2)·std, mean + (snr + 3)·std], lower bound clamped to ≥ 0."""
+    return max(mean + (snr - 2.0) * std, 0.0), mean + (snr + 3.0) * std
+
+
+@dataclass
+class SaliencyFrame:
+    """Saliency output for one frame (0-based index ``frame`` into the input)."""
+
+    frame: int
+    proposal: np.ndarray  # (H, W) f32, OPsal_N of Eq. 33: sums to 1 over each non-empty block
+    threshold: float  # T_acc2 of Eq. 23
+    i_range: tuple[float, float]  # Eq. 26
+    mask: np.ndarray | None = None  # (H, W) bool, I_rt of Eq. 24 (None unless details=True)
+    n_eff: np.ndarray | None = None  # (B,) Eq. 30
+    k: np.ndarray | None = None  # (B,) rank of T_ep (Eq. 31)
+    nnz: np.ndarray | None = None  # (B,) candidate pixels per block
+
+
+class NumpySaliencyEngine:
+    """Ring buffers as NumPy arrays; every step is a call of the NumPy twin."""
+
+    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
+        self.grid, self.d, self.r = grid, d, window
+        self.ring = {name: np.zeros((3,) + tuple(shape), np.float32) for name in ("z", "se_max", "acc", "acc_max")}
+        self.acc2 = np.zeros(shape, np.float32)
+
+    def put(self, slot: int, z: np.ndarray) -> None:
+        self.ring["z"][slot] = z
+
+    def energy(self, slot: int) -> None:
+        self.ring["se_max"][slot] = nps.max_filter(nps.energy_collection(self.ring["z"][slot], self.r), self.r)
+
+    def accumulate(self, src: str, slots, scale: float, dst_slot: int | None) -> None:
+        """Eq. 22 layer: 3-frame sum of ``src`` slots (−1 = missing); layer 1 also max-filters."""
+        frames = [self.ring[src][s] if s >= 0 else None for s in slots]
+        total = nps.sum_frames(*frames, scale)
+        if dst_slot is None:
+            self.acc2 = total
+        else:
+            self.ring["acc"][dst_slot] = total
+            self.ring["acc_max"][dst_slot] = nps.max_filter(total, self.r)
+
+    def moments(self, name: str, slot: int) -> np.ndarray:
+        return nps.row_moments(self.acc2 if name == "acc2" else self.ring[name][slot])
+
+    def segment_blocks(self, slot, threshold, i_min, i_max, a, details: bool = True) -> dict:
+        mask = nps.segment(self.acc2, threshold, self.ring["acc"][slot], self.ring["acc_max"][slot])
+        logw = nps.lef_map(self.ring["z"][slot], self.d, 1.0, a, i_min, i_max)
+        out = nps.block_proposal(mask, logw, self.grid.block_id, self.grid.n_blocks)
+        out["mask"] = mask
+        return out
+
+
+class TaichiSaliencyEngine:
+    """Ring buffers as Taichi fields; each step is one kernel launch over all pixels or all blocks."""
+
+    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
+        import taichi as ti
+
+        from .kernels import saliency as ks
+
+        self.ks, self.grid, self.r = ks, grid, window
+        h, w = shape
+        self.ring = {name: ti.field(ti.f32, shape=(3, h, w)) for name in ("z", "se_max", "acc", "acc_max")}
+        self.tmp = ti.field(ti.f32, shape=(1, h, w))
+        self.acc2 = ti.field(ti.f32, shape=(1, h, w))
+        self.rows = ti.field(ti.f64, shape=(h, 2))
+        self.d = ti.field(ti.f32, shape=(5, 5))
+        self.d.from_numpy(d)
+        self.block_id = ti.field(ti.i32, shape=(h, w))
+        self.block_id.from_numpy(grid.block_id)
+        nb = grid.n_blocks
+        self.block_offset = ti.field(ti.i32, shape=nb)
+        self.block_offset.from_numpy(grid.offsets)
+        self.block_max = ti.field(ti.f32, shape=nb)
+        self.block_sum = ti.field(ti.f64, shape=nb)
+        self.block_sum2 = ti.field(ti.f64, shape=nb)
+        self.block_op = ti.field(ti.f64, shape=nb)
+        self.block_nnz = ti.field(ti.i32, shape=nb)
+        self.mask = ti.field(ti.i32, shape=(h, w))
+        self.proposal = ti.field(ti.f32, shape=(h, w))
+        n = h * w
+        self.entry_pixel = ti.field(ti.i32, shape=n)
+        self.entry_logw = ti.field(ti.f32, shape=n)
+        self.entry_sal = ti.field(ti.f32, shape=n)
+        self.entry_keep = ti.field(ti.i32, shape=n)
+        self.max_area = int(grid.areas.max())
+
+    def put(self, slot: int, z: np.ndarray) -> None:
+        self.ks.load_slot(z, self.ring["z"], slot)
+
+    def energy(self, slot: int) -> None:
+        self.ks.energy_collection(self.ring["z"], slot, self.tmp, 0, self.r)
+        self.ks.max_filter(self.tmp, 0, self.ring["se_max"], slot, self.r)
+
+    def accumulate(self, src: str, slots, scale: float, dst_slot: int | None) -> None:
+        if dst_slot is None:
+            self.ks.sum_slots(self.ring[src], *slots, scale, self.acc2, 0)
+        else:
+            self.ks.sum_slots(self.ring[src], *slots, scale, self.ring["acc"], dst_slot)
+            self.ks.max_filter(self.ring["acc"], dst_slot, self.ring["acc_max"], dst_slot, self.r)
+
+    def moments(self, name: str, slot: int) -> np.ndarray:
+        field, s = (self.acc2, 0) if name == "acc2" else (self.ring[name], slot)
+        self.ks.row_moments(field, s, self.rows)
+        return self.rows.to_numpy()
+
+    def segment_blocks(self, slot, threshold, i_min, i_max, a, details: bool = True) -> dict:
+        ks = self.ks
+        ks.reset_blocks(self.block_max, self.block_sum, self.block_sum2, self.block_nnz, self.block_op)
+        ks.segment_and_lef(self.acc2, threshold, self.ring["acc"], self.ring["acc_max"], slot, self.ring["z"], slot,
+                           self.d, 1.0, a, i_min, i_max, self.block_id, self.block_offset, self.mask, self.proposal,
+                           self.block_max, self.block_nnz, self.entry_pixel, self.entry_logw)
+        ks.block_saliency(self.block_offset, self.block_nnz, self.block_max, self.entry_logw, self.entry_sal,
+                          self.block_sum, self.block_sum2, self.max_area)
+        ks.eliminate_low_weight(self.block_offset, self.block_nnz, self.block_sum, self.block_sum2, self.entry_logw,
+                                self.entry_sal, self.entry_keep, self.block_op, self.max_area)
+        ks.write_proposal(self.block_offset, self.block_nnz, self.block_op, self.entry_pixel, self.entry_sal,
+                          self.entry_keep, self.proposal, self.max_area)
+        if not details:
+            return {"proposal": self.proposal.to_numpy()}
+        nnz = self.block_nnz.to_numpy().astype(np.int64)
+        s1, s2 = self.block_sum.to_numpy(), self.block_sum2.to_numpy()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            neff = np.where(nnz > 0, s1 * s1 / s2, 0.0)
+        k = np.minimum(np.maximum(np.floor(neff + 0.5).astype(np.int64), 1), nnz)
+        return {"proposal": self.proposal.to_numpy(), "mask": self.mask.to_numpy().astype(bool),
+                "n_eff": neff, "k": k, "nnz": nnz}
+
+
+class SaliencyExtractor:
+    """Streaming saliency stage: ``push`` normalised frames, get proposal maps 2 frames later.
+
+    ``snr`` is the lowest SNR to detect (Eqs. 23 and 26); ``block_size`` is L_ib (px);
+    ``psf_sigma`` is Σ (px) of D (Eq. 25); ``window`` the radius of the 3×3 operators.
+    ``details=False`` returns only the proposal map (the tracker's path; saves transfers).
+    """
+
+    def __init__(self, shape, snr: float = 1.4, block_size: int = 150, psf_sigma: float = 0.7,
+                 engine: str = "taichi", window: int = 1, arch: str | None = None, details: bool = True):
+        if engine not in ENGINES:
+            raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        if len(shape) != 2 or min(shape) < 1:
+            raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape}")
+        if snr <= 0 or psf_sigma <= 0 or window < 1:
+            raise ParameterError("snr and psf_sigma must be > 0 and window ≥ 1")
+        self.shape, self.snr = (int(shape[0]), int(shape[1])), float(snr)
+        self.grid = block_grid(self.shape, block_size)
+        d = psf_matrix(psf_sigma)
+        self.a = float((d.astype(np.float64) ** 2).sum() / 2.0)  # A = ΣD²/(2σ²), σ = 1 (Eq. 27)
+        if engine == "taichi":
+            backend.ensure_init(arch)
+            self.engine = TaichiSaliencyEngine(self.shape, self.grid, d, window)
+        else:
+            self.engine = NumpySaliencyEngine(self.shape, self.grid, d, window)
+        self.details = details
+        self.n_pushed = 0
+        self.n_emitted = 0
+
+    def _check(self, z) -> np.ndarray:
+        z = np.asarray(z)
+        if z.shape != self.shape:
+            raise InputError(f"frame {self.n_pushed} has shape {z.shape}; this extractor was built for {self.shape}")
+        if not np.isfinite(z).all():
+            raise InputError(f"frame {self.n_pushed} contains NaN or inf")
+        return np.ascontiguousarray(z, dtype=np.float32)
+
+    def _slots(self, centre: int, last: int) -> tuple[list[int], float]:
+        """Ring slots of frames centre−1..centre+1 that exist in [0, last], and the 3/n scale."""
+        slots = [f % 3 if 0 <= f <= last else -1 for f in (centre - 1, centre, centre + 1)]
+        return slots, 3.0 / sum(s >= 0 for s in slots)
+
+    def _layer1(self, f: int, last: int) -> None:
+        slots, scale = self._slots(f, last)
+        self.engine.accumulate("se_max", slots, scale, f % 3)
+
+    def _emit(self, f: int, last: int) -> SaliencyFrame:
+        slots, scale = self._slots(f, last)
+        eng = self.engine
+        eng.accumulate("acc_max", slots, scale, None)
+        count = self.shape[0] * self.shape[1]
+        threshold = segmentation_threshold(*moments_to_mean_std(eng.moments("acc2", 0), count), self.snr)
+        i_min, i_max = intensity_range(*moments_to_mean_std(eng.moments("z", f % 3), count), self.snr)
+        out = eng.segment_blocks(f % 3, threshold, i_min, i_max, self.a, self.details)
+        self.n_emitted = f + 1
+        return SaliencyFrame(f, out["proposal"], threshold, (i_min, i_max), out.get("mask"), out.get("n_eff"),
+                             out.get("k"), out.get("nnz"))
+
+    def push(self, z) -> list[SaliencyFrame]:
+        """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""
+        z = self._check(z)
+        t = self.n_pushed
+        self.engine.put(t % 3, z)
+        self.engine.energy(t % 3)
+        self.n_pushed = t + 1
+        if t >= 1:
+            self._layer1(t - 1, t)
+        return [self._emit(t - 2, t)] if t >= 2 else []
+
+    def flush(self) -> list[SaliencyFrame]:
+        """Finish the sequence: outputs for the last (up to) two frames, with truncated sums."""
+        last = self.n_pushed - 1
+        if last < 0:
+            return []
+        self._layer1(last, last)
+        return [self._emit(f, last) for f in range(self.n_emitted, last + 1)]
+
+
+def saliency_sequence(frames, **kwargs) -> list[SaliencyFrame]:
+    """Run the extractor over a whole (T, H, W) sequence of normalised frames."""
+    frames = np.asarray(frames)
+    ext = SaliencyExtractor(frames.shape[1:], **kwargs)
+    out = []
+    for z in frames:
+        out.extend(ext.push(z))
+    return out + ext.flush()
