@@ -94,9 +94,9 @@ class SaliencyFrame:
     """Saliency output for one frame (0-based index ``frame`` into the input)."""
 
     frame: int
-    proposal: np.ndarray  # (H, W) f32, OPsal_N of Eq. 33: sums to 1 over each non-empty block
-    threshold: float  # T_acc2 of Eq. 23
-    i_range: tuple[float, float]  # Eq. 26
+    proposal: np.ndarray | None  # (H, W) f32, OPsal_N of Eq. 33: sums to 1 over each non-empty block
+    threshold: float | None = None  # T_acc2 of Eq. 23
+    i_range: tuple[float, float] | None = None  # Eq. 26
     mask: np.ndarray | None = None  # (H, W) bool, I_rt of Eq. 24 (None unless details=True)
     n_eff: np.ndarray | None = None  # (B,) Eq. 30
     k: np.ndarray | None = None  # (B,) rank of T_ep (Eq. 31)
@@ -109,37 +109,63 @@ class NumpySaliencyEngine:
     def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
         self.grid, self.d, self.r = grid, d, window
         self.ring = {name: np.zeros((3,) + tuple(shape), np.float32) for name in ("z", "se_max", "acc", "acc_max")}
-        self.acc2 = np.zeros(shape, np.float32)
 
-    def put(self, slot: int, z: np.ndarray) -> None:
+    def put_and_energy(self, slot: int, z: np.ndarray) -> None:
+        """Store frame t and compute I_se_max(t) (Eqs. 20–21 and the first max filter)."""
         self.ring["z"][slot] = z
+        self.ring["se_max"][slot] = nps.max_filter(nps.energy_collection(z, self.r), self.r)
 
-    def energy(self, slot: int) -> None:
-        self.ring["se_max"][slot] = nps.max_filter(nps.energy_collection(self.ring["z"][slot], self.r), self.r)
+    def first_layer(self, slots, scale: float, dst: int) -> None:
+        """I_acc (Eq. 22, first layer) into acc[dst] and its max filter into acc_max[dst]."""
+        total = nps.sum_frames(*[self.ring["se_max"][s] if s >= 0 else None for s in slots], scale)
+        self.ring["acc"][dst] = total
+        self.ring["acc_max"][dst] = nps.max_filter(total, self.r)
 
-    def accumulate(self, src: str, slots, scale: float, dst_slot: int | None) -> None:
-        """Eq. 22 layer: 3-frame sum of ``src`` slots (−1 = missing); layer 1 also max-filters."""
-        frames = [self.ring[src][s] if s >= 0 else None for s in slots]
-        total = nps.sum_frames(*frames, scale)
-        if dst_slot is None:
-            self.acc2 = total
-        else:
-            self.ring["acc"][dst_slot] = total
-            self.ring["acc_max"][dst_slot] = nps.max_filter(total, self.r)
-
-    def moments(self, name: str, slot: int) -> np.ndarray:
-        return nps.row_moments(self.acc2 if name == "acc2" else self.ring[name][slot])
-
-    def segment_blocks(self, slot, threshold, i_min, i_max, a, details: bool = True) -> dict:
-        mask = nps.segment(self.acc2, threshold, self.ring["acc"][slot], self.ring["acc_max"][slot])
-        logw = nps.lef_map(self.ring["z"][slot], self.d, 1.0, a, i_min, i_max)
+    def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
+        """I_acc2, Eqs. 23–24 and 26–33 for the frame in ``slot``."""
+        acc2 = nps.sum_frames(*[self.ring["acc_max"][s] if s >= 0 else None for s in slots], scale)
+        count = acc2.size
+        threshold = segmentation_threshold(*moments_to_mean_std(nps.row_moments(acc2), count), snr)
+        z = self.ring["z"][slot]
+        i_min, i_max = intensity_range(*moments_to_mean_std(nps.row_moments(z), count), snr)
+        mask = nps.segment(acc2, threshold, self.ring["acc"][slot], self.ring["acc_max"][slot])
+        logw = nps.lef_map(z, self.d, 1.0, a, i_min, i_max)
         out = nps.block_proposal(mask, logw, self.grid.block_id, self.grid.n_blocks)
-        out["mask"] = mask
+        out.update(mask=mask, threshold=threshold, i_range=(i_min, i_max))
         return out
 
 
+SERIAL_PIXELS = 1 << 18  # up to this many pixels, serial loops beat a parallel launch on the CPU
+
+
+def lane_layout(width: int) -> tuple[int, np.ndarray]:
+    """Number of 8-lane vectors per row and the (V, 8) lane-validity mask (1 inside, 0 padding)."""
+    from .kernels.saliency import LANES
+
+    blocks = -(-width // LANES)
+    valid = (np.arange(blocks * LANES).reshape(blocks, LANES) < width).astype(np.float32)
+    return blocks, valid
+
+
+def to_lanes(image: np.ndarray, blocks: int, out: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) float32 → (H, V, 8) with zero padding lanes: a view when W = 8V, else written into ``out``."""
+    h, w = image.shape
+    if w == blocks * 8:
+        return np.ascontiguousarray(image, dtype=np.float32).reshape(h, blocks, 8)
+    if out is None:
+        out = np.zeros((h, blocks * 8), np.float32)
+    out[:, :w] = image
+    return out.reshape(h, blocks, 8)
+
+
+def from_lanes(lanes: np.ndarray, width: int) -> np.ndarray:
+    """(…, H, V, 8) → (…, H, W)."""
+    return lanes.reshape(lanes.shape[:-2] + (-1,))[..., :width]
+
+
 class TaichiSaliencyEngine:
-    """Ring buffers as Taichi fields; each step is one kernel launch over all pixels or all blocks."""
+    """Ring buffers as Taichi fields of 8-lane vectors; each step is one kernel launch for the
+    whole image or for all blocks."""
 
     def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
         import taichi as ti
@@ -148,10 +174,21 @@ class TaichiSaliencyEngine:
 
         self.ks, self.grid, self.r = ks, grid, window
         h, w = shape
-        self.ring = {name: ti.field(ti.f32, shape=(3, h, w)) for name in ("z", "se_max", "acc", "acc_max")}
-        self.tmp = ti.field(ti.f32, shape=(1, h, w))
-        self.acc2 = ti.field(ti.f32, shape=(1, h, w))
-        self.rows = ti.field(ti.f64, shape=(h, 2))
+        self.shape = (h, w)
+        self.serial = h * w <= SERIAL_PIXELS and backend.current().arch == "cpu"
+        self.n_lanes, valid = lane_layout(w)
+        self.valid = ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes)
+        self.valid.from_numpy(valid)
+        image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, self.n_lanes))  # noqa: E731
+        self.ring = {name: image(3) for name in ("z", "se_max", "acc", "acc_max")}
+        self.hs, self.hm, self.tmp, self.tmp2, self.acc2 = image(), image(), image(), image(), image()
+        self.z_scalar = ti.field(ti.f32, shape=(3, h, w))
+        self.z_rows = ti.field(ti.f64, shape=(3, h, 2))
+        self.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
+        self.row_x = ti.field(ti.i32, shape=(h, w))
+        self.row_logw = ti.field(ti.f32, shape=(h, w))
+        self.n_row = ti.field(ti.i32, shape=h)
+        self.stats = ti.field(ti.f64, shape=8)
         self.d = ti.field(ti.f32, shape=(5, 5))
         self.d.from_numpy(d)
         self.block_id = ti.field(ti.i32, shape=(h, w))
@@ -160,59 +197,48 @@ class TaichiSaliencyEngine:
         self.block_offset = ti.field(ti.i32, shape=nb)
         self.block_offset.from_numpy(grid.offsets)
         self.block_max = ti.field(ti.f32, shape=nb)
-        self.block_sum = ti.field(ti.f64, shape=nb)
-        self.block_sum2 = ti.field(ti.f64, shape=nb)
-        self.block_op = ti.field(ti.f64, shape=nb)
+        self.block_max.fill(ks.NEG_INF)
         self.block_nnz = ti.field(ti.i32, shape=nb)
-        self.mask = ti.field(ti.i32, shape=(h, w))
+        self.block_stats = ti.field(ti.f64, shape=(nb, 4))
         self.proposal = ti.field(ti.f32, shape=(h, w))
-        n = h * w
-        self.entry_pixel = ti.field(ti.i32, shape=n)
-        self.entry_logw = ti.field(ti.f32, shape=n)
-        self.entry_sal = ti.field(ti.f32, shape=n)
-        self.entry_keep = ti.field(ti.i32, shape=n)
-        self.max_area = int(grid.areas.max())
+        self.written = ti.field(ti.i32, shape=h * w)
+        self.n_written = ti.field(ti.i32, shape=())
+        self.entry_pixel = ti.field(ti.i32, shape=h * w)
+        self.entry_logw = ti.field(ti.f32, shape=h * w)
+        self.entry_sal = ti.field(ti.f32, shape=h * w)
+        self.scratch = ti.field(ti.f32, shape=h * w)
+        self.host_lanes = np.zeros((h, self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
 
-    def put(self, slot: int, z: np.ndarray) -> None:
-        self.ks.load_slot(z, self.ring["z"], slot)
-
-    def energy(self, slot: int) -> None:
-        self.ks.energy_collection(self.ring["z"], slot, self.tmp, 0, self.r)
-        self.ks.max_filter(self.tmp, 0, self.ring["se_max"], slot, self.r)
-
-    def accumulate(self, src: str, slots, scale: float, dst_slot: int | None) -> None:
-        if dst_slot is None:
-            self.ks.sum_slots(self.ring[src], *slots, scale, self.acc2, 0)
-        else:
-            self.ks.sum_slots(self.ring[src], *slots, scale, self.ring["acc"], dst_slot)
-            self.ks.max_filter(self.ring["acc"], dst_slot, self.ring["acc_max"], dst_slot, self.r)
-
-    def moments(self, name: str, slot: int) -> np.ndarray:
-        field, s = (self.acc2, 0) if name == "acc2" else (self.ring[name], slot)
-        self.ks.row_moments(field, s, self.rows)
-        return self.rows.to_numpy()
-
-    def segment_blocks(self, slot, threshold, i_min, i_max, a, details: bool = True) -> dict:
+    def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         ks = self.ks
-        ks.reset_blocks(self.block_max, self.block_sum, self.block_sum2, self.block_nnz, self.block_op)
-        ks.segment_and_lef(self.acc2, threshold, self.ring["acc"], self.ring["acc_max"], slot, self.ring["z"], slot,
-                           self.d, 1.0, a, i_min, i_max, self.block_id, self.block_offset, self.mask, self.proposal,
-                           self.block_max, self.block_nnz, self.entry_pixel, self.entry_logw)
-        ks.block_saliency(self.block_offset, self.block_nnz, self.block_max, self.entry_logw, self.entry_sal,
-                          self.block_sum, self.block_sum2, self.max_area)
-        ks.eliminate_low_weight(self.block_offset, self.block_nnz, self.block_sum, self.block_sum2, self.entry_logw,
-                                self.entry_sal, self.entry_keep, self.block_op, self.max_area)
-        ks.write_proposal(self.block_offset, self.block_nnz, self.block_op, self.entry_pixel, self.entry_sal,
-                          self.entry_keep, self.proposal, self.max_area)
+        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.ring["z"], slot, self.z_scalar, self.z_rows, self.serial)
+        ks.energy_collection_max(self.ring["z"], slot, self.valid, self.hs, self.hm, self.tmp, self.tmp2,
+                                 self.ring["se_max"], slot, self.r, self.serial)
+
+    def first_layer(self, slots, scale: float, dst: int) -> None:
+        self.ks.accumulate_max(self.ring["se_max"], *slots, scale, self.valid, self.ring["acc"], dst, self.tmp,
+                               self.ring["acc_max"], self.r, self.serial)
+
+    def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
+        ks = self.ks
+        ks.accumulate_moments(self.ring["acc_max"], *slots, scale, self.acc2, self.acc2_rows, self.serial)
+        ks.frame_statistics(self.acc2_rows, self.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.stats)
+        ks.segment_and_lef(self.acc2, self.ring["acc"], self.ring["acc_max"], slot, self.z_scalar, self.valid, self.d,
+                           a, self.stats, self.row_x, self.row_logw, self.n_row, self.serial)
+        ks.block_proposal(self.row_x, self.row_logw, self.n_row, self.block_id, self.block_offset, self.block_nnz,
+                          self.block_max, self.entry_pixel, self.entry_logw, self.entry_sal, self.scratch,
+                          self.block_stats, self.proposal, self.written, self.n_written)
         if not details:
-            return {"proposal": self.proposal.to_numpy()}
-        nnz = self.block_nnz.to_numpy().astype(np.int64)
-        s1, s2 = self.block_sum.to_numpy(), self.block_sum2.to_numpy()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            neff = np.where(nnz > 0, s1 * s1 / s2, 0.0)
-        k = np.minimum(np.maximum(np.floor(neff + 0.5).astype(np.int64), 1), nnz)
-        return {"proposal": self.proposal.to_numpy(), "mask": self.mask.to_numpy().astype(bool),
-                "n_eff": neff, "k": k, "nnz": nnz}
+            return {}
+        stats, blocks = self.stats.to_numpy(), self.block_stats.to_numpy()
+        nnz = blocks[:, 2].astype(np.int64)
+        entries = self.entry_pixel.to_numpy()
+        mask = np.zeros(self.shape, bool)
+        for off, n in zip(self.grid.offsets, nnz):
+            mask.ravel()[entries[off:off + n]] = True
+        return {"proposal": self.proposal.to_numpy(), "mask": mask,
+                "threshold": float(stats[0]), "i_range": (float(stats[1]), float(stats[2])),
+                "n_eff": blocks[:, 0], "k": blocks[:, 1].astype(np.int64), "nnz": nnz}
 
 
 class SaliencyExtractor:
@@ -220,7 +246,8 @@ class SaliencyExtractor:
 
     ``snr`` is the lowest SNR to detect (Eqs. 23 and 26); ``block_size`` is L_ib (px);
     ``psf_sigma`` is Σ (px) of D (Eq. 25); ``window`` the radius of the 3×3 operators.
-    ``details=False`` returns only the proposal map (the tracker's path; saves transfers).
+    ``details=False`` copies nothing back to the host: the proposal stays in the engine
+    (the tracker's path), and the returned frames carry only their index.
     """
 
     def __init__(self, shape, snr: float = 1.4, block_size: int = 150, psf_sigma: float = 0.7,
@@ -259,26 +286,20 @@ class SaliencyExtractor:
 
     def _layer1(self, f: int, last: int) -> None:
         slots, scale = self._slots(f, last)
-        self.engine.accumulate("se_max", slots, scale, f % 3)
+        self.engine.first_layer(slots, scale, f % 3)
 
     def _emit(self, f: int, last: int) -> SaliencyFrame:
         slots, scale = self._slots(f, last)
-        eng = self.engine
-        eng.accumulate("acc_max", slots, scale, None)
-        count = self.shape[0] * self.shape[1]
-        threshold = segmentation_threshold(*moments_to_mean_std(eng.moments("acc2", 0), count), self.snr)
-        i_min, i_max = intensity_range(*moments_to_mean_std(eng.moments("z", f % 3), count), self.snr)
-        out = eng.segment_blocks(f % 3, threshold, i_min, i_max, self.a, self.details)
+        out = self.engine.second_layer_and_blocks(slots, scale, f % 3, self.snr, self.a, self.details)
         self.n_emitted = f + 1
-        return SaliencyFrame(f, out["proposal"], threshold, (i_min, i_max), out.get("mask"), out.get("n_eff"),
-                             out.get("k"), out.get("nnz"))
+        return SaliencyFrame(f, out.get("proposal"), out.get("threshold"), out.get("i_range"), out.get("mask"),
+                             out.get("n_eff"), out.get("k"), out.get("nnz"))
 
     def push(self, z) -> list[SaliencyFrame]:
         """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""
         z = self._check(z)
         t = self.n_pushed
-        self.engine.put(t % 3, z)
-        self.engine.energy(t % 3)
+        self.engine.put_and_energy(t % 3, z)
         self.n_pushed = t + 1
         if t >= 1:
             self._layer1(t - 1, t)

@@ -10,8 +10,8 @@ import taichi as ti
 from tbd_taichi import normalize, simulate
 from tbd_taichi.kernels import saliency as ks
 from tbd_taichi.numpy_kernels import saliency as nps
-from tbd_taichi.saliency import (SaliencyExtractor, block_grid, intensity_range, psf_matrix, saliency_sequence,
-                                 segmentation_threshold)
+from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
+                                 lane_layout, psf_matrix, saliency_sequence, segmentation_threshold, to_lanes)
 
 SHAPES = [(1, 17), (17, 1), (1, 1), (7, 9), (31, 45), (64, 50)]
 D = psf_matrix(0.7)
@@ -24,8 +24,18 @@ def ring(img):
     return f
 
 
-def out_field(shape):
-    return ti.field(ti.f32, shape=(1,) + shape)
+def lane_ring(img):
+    """A one-slot lane-layout ring holding ``img``, its validity mask and the lane count."""
+    blocks, valid = lane_layout(img.shape[1])
+    f = ti.Vector.field(8, ti.f32, shape=(1, img.shape[0], blocks))
+    f.from_numpy(to_lanes(img.astype(np.float32), blocks)[None])
+    v = ti.Vector.field(8, ti.f32, shape=blocks)
+    v.from_numpy(valid)
+    return f, v, blocks
+
+
+def lane_out(shape, blocks):
+    return ti.Vector.field(8, ti.f32, shape=(1, shape[0], blocks))
 
 
 def random_image(rng, shape, kind):
@@ -36,34 +46,42 @@ def random_image(rng, shape, kind):
     return rng.integers(-2, 3, size=shape).astype(np.float32)  # many ties and plateaus
 
 
+KINDS = ["normal", "extreme", "ties"]
+
+
 @pytest.mark.parametrize("shape", SHAPES)
-@pytest.mark.parametrize("kind", ["normal", "extreme", "ties"])
 @pytest.mark.parametrize("r", [1, 2])
-def test_max_filter_against_scipy_cv2_and_twin(rng, shape, kind, r):
-    img = random_image(rng, shape, kind)
-    src, dst = ring(img), out_field(shape)
-    ks.max_filter(src, 0, dst, 0, r)
-    got = dst.to_numpy()[0]
+def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
+    serial = SHAPES.index(shape) % 2 == 0  # both loop modes, without compiling every case twice
+    src, valid, blocks = lane_ring(np.zeros(shape, np.float32))
+    tmp, dst = lane_out(shape, blocks), lane_out(shape, blocks)
     size = 2 * r + 1
-    np.testing.assert_array_equal(got, ndi.maximum_filter(img, size=size, mode="nearest"))
-    np.testing.assert_array_equal(got, cv2.dilate(img, np.ones((size, size), np.uint8)))
-    np.testing.assert_array_equal(got, nps.max_filter(img, r))
+    for kind in KINDS:
+        img = random_image(rng, shape, kind)
+        src.from_numpy(to_lanes(img, blocks)[None])
+        ks.max_filter(src, 0, valid, tmp, dst, 0, r, serial)
+        got = from_lanes(dst.to_numpy()[0], shape[1])
+        np.testing.assert_array_equal(got, ndi.maximum_filter(img, size=size, mode="nearest"))
+        np.testing.assert_array_equal(got, cv2.dilate(img, np.ones((size, size), np.uint8)))
+        np.testing.assert_array_equal(got, nps.max_filter(img, r))
 
 
 @pytest.mark.parametrize("shape", SHAPES)
-@pytest.mark.parametrize("kind", ["normal", "extreme", "ties"])
-def test_energy_collection(rng, shape, kind):
-    z = random_image(rng, shape, kind)
-    src, dst = ring(z), out_field(shape)
-    ks.energy_collection(src, 0, dst, 0, 1)
-    got = dst.to_numpy()[0]
-    np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
-    p = np.maximum(z.astype(np.float64), 0)
-    total = ndi.correlate(p, np.ones((3, 3)), mode="constant")
-    peak = ndi.maximum_filter(p, 3, mode="constant")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ref = np.where(peak > 0, p * total / peak, 0)
-    np.testing.assert_allclose(got, ref, rtol=3e-6, atol=1e-30)  # f32: 9-term sum, 2 roundings
+def test_energy_collection(rng, shape):
+    engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
+    for kind in KINDS:
+        z = random_image(rng, shape, kind)
+        engine.put_and_energy(1, z)
+        got = from_lanes(engine.tmp.to_numpy()[0], shape[1])  # I_se
+        np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
+        se_max = from_lanes(engine.ring["se_max"].to_numpy()[1], shape[1])
+        np.testing.assert_array_equal(se_max, nps.max_filter(got))
+        p = np.maximum(z.astype(np.float64), 0)
+        total = ndi.correlate(p, np.ones((3, 3)), mode="constant")
+        peak = ndi.maximum_filter(p, 3, mode="constant")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ref = np.where(peak > 0, p * total / peak, 0)
+        np.testing.assert_allclose(got, ref, rtol=3e-6, atol=1e-30)  # f32: 9-term sum, 2 roundings
 
 
 def test_energy_collection_where_the_maximum_is_not_positive():
@@ -98,7 +116,7 @@ def test_lef_is_the_maximum_over_the_intensity_range(rng, snr):
     dst = ti.field(ti.f32, shape=z.shape)
     dfield = ti.field(ti.f32, shape=(5, 5))
     dfield.from_numpy(D)
-    ks.lef_map(ring(z), 0, dfield, 1.0, A, i_min, i_max, dst)
+    ks.lef_map(ring(z), 0, dfield, A, i_min, i_max, dst)
     got = dst.to_numpy()
     np.testing.assert_allclose(got, nps.lef_map(z, D, 1.0, A, i_min, i_max), rtol=1e-6, atol=1e-6)
     b = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")

@@ -9,22 +9,30 @@ import numpy as np
 F32 = np.float32
 
 
-def _shifted(padded: np.ndarray, pad: int, dy: int, dx: int, shape) -> np.ndarray:
-    h, w = shape
-    return padded[pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+def _window_sum_max(p: np.ndarray, r: int, axis: int):
+    """Σ and max over |d| ≤ r along ``axis`` (zero outside), summed from −r to r."""
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (r, r)
+    padded = np.pad(p, pad)
+    n = p.shape[axis]
+    total = np.zeros_like(p)
+    peak = np.zeros_like(p)
+    for d in range(2 * r + 1):
+        v = padded[d:d + n] if axis == 0 else padded[:, d:d + n]
+        total = total + v
+        peak = np.maximum(peak, v)
+    return total, peak
 
 
 def energy_collection(z: np.ndarray, r: int = 1) -> np.ndarray:
-    """Eqs. 20–21 on p = max(z, 0): p·Σ p / max p over the (2r+1)² window; 0 where max p = 0."""
+    """Eqs. 20–21 on p = max(z, 0): p·Σ p / max p over the (2r+1)² window; 0 where max p = 0.
+
+    The window sum is separable, rows first, as in the kernel.
+    """
     p = np.maximum(z.astype(F32), F32(0))
-    padded = np.pad(p, r)
-    total = np.zeros_like(p)
-    peak = np.zeros_like(p)
-    for dy in range(-r, r + 1):
-        for dx in range(-r, r + 1):
-            v = _shifted(padded, r, dy, dx, p.shape)
-            total = total + v
-            peak = np.maximum(peak, v)
+    hs, hm = _window_sum_max(p, r, 1)
+    total, _ = _window_sum_max(hs, r, 0)
+    _, peak = _window_sum_max(hm, r, 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(peak > 0, p * total / peak, F32(0)).astype(F32)
 
@@ -63,7 +71,7 @@ def correlate_d(z: np.ndarray, d: np.ndarray) -> np.ndarray:
     acc = np.zeros(z.shape, F32)
     for dy in range(5):
         for dx in range(5):
-            acc = acc + F32(d[dy, dx]) * _shifted(padded, 2, dy - 2, dx - 2, z.shape)
+            acc = acc + F32(d[dy, dx]) * padded[dy:dy + z.shape[0], dx:dx + z.shape[1]]
     return acc
 
 
