@@ -322,3 +322,35 @@ def saliency_sequence(frames, **kwargs) -> list[SaliencyFrame]:
     for z in frames:
         out.extend(ext.push(z))
     return out + ext.flush()
+
+
+def saliency_stages(frames, f: int, snr: float = 1.4, block_size: int = 150, psf_sigma: float = 0.7) -> dict:
+    """Every intermediate map of frame ``f`` (2 ≤ f ≤ T−3) by the NumPy twin, for figures and debugging.
+
+    Keys: z, I_se, I_acc2, I_rt (mask), lef (log ω̌_lef), saliency (Sal/ΣSal per block), proposal
+    (OPsal_N, Eq. 33), block_id.
+    """
+    frames = np.asarray(frames, np.float32)
+    if not 2 <= f <= len(frames) - 3:
+        raise ParameterError(f"frame {f} needs frames f-2..f+2 inside the sequence of {len(frames)}")
+    se_max = {k: nps.max_filter(nps.energy_collection(frames[k])) for k in range(f - 2, f + 3)}
+    acc = {k: nps.sum_frames(se_max[k - 1], se_max[k], se_max[k + 1], 1.0) for k in range(f - 1, f + 2)}
+    acc_max = {k: nps.max_filter(v) for k, v in acc.items()}
+    acc2 = nps.sum_frames(acc_max[f - 1], acc_max[f], acc_max[f + 1], 1.0)
+    count = acc2.size
+    threshold = segmentation_threshold(*moments_to_mean_std(nps.row_moments(acc2), count), snr)
+    i_min, i_max = intensity_range(*moments_to_mean_std(nps.row_moments(frames[f]), count), snr)
+    d = psf_matrix(psf_sigma)
+    a = float((d.astype(np.float64) ** 2).sum() / 2.0)
+    mask = nps.segment(acc2, threshold, acc[f], acc_max[f])
+    lef = nps.lef_map(frames[f], d, 1.0, a, i_min, i_max)
+    grid = block_grid(frames.shape[1:], block_size)
+    out = nps.block_proposal(mask, lef, grid.block_id, grid.n_blocks)
+    saliency = np.zeros(mask.shape, np.float64)
+    for b in range(grid.n_blocks):
+        inside = mask & (grid.block_id == b)
+        if inside.any():
+            w = np.exp(lef[inside] - lef[inside].max())
+            saliency[inside] = w / w.sum()
+    return {"z": frames[f], "I_se": nps.energy_collection(frames[f]), "I_acc2": acc2, "I_rt": mask, "lef": lef,
+            "saliency": saliency, "proposal": out["proposal"], "block_id": grid.block_id}
