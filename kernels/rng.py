@@ -16,6 +16,7 @@ MIX1 = 0x7FEB352D
 MIX2 = 0x846CA68B
 TWO_PI = 6.283185307179586
 INV_2_24 = 1.0 / 16777216.0
+INV_2_53 = 1.0 / 9007199254740992.0
 
 
 @ti.func
@@ -60,6 +61,16 @@ def normal(seed, frame, stream, index) -> ti.f32:
     return ti.sqrt(ti.f32(-2.0) * ti.log(u1)) * ti.cos(ti.f32(TWO_PI) * u2)
 
 
+@ti.func
+def uniform_f64(seed, frame, stream, index) -> ti.f64:
+    """U(0, 1) in f64 with 53 random bits (two hashes of the key), for long cumulative sums."""
+    h = hash_key(seed, frame, stream, index)
+    h2 = lowbias32(h + ti.u32(GOLDEN))
+    hi = ti.cast(h >> 5, ti.f64)  # 27 bits
+    lo = ti.cast(h2 >> 6, ti.f64)  # 26 bits
+    return (hi * ti.f64(67108864.0) + lo + ti.f64(0.5)) * ti.f64(INV_2_53)
+
+
 @ti.kernel
 def fill_hash(out: ti.types.ndarray(dtype=ti.u32, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
     """out[i] = hash_key(seed, frame, stream, offset + i)."""
@@ -72,6 +83,14 @@ def fill_uniform(out: ti.types.ndarray(dtype=ti.f32, ndim=1), seed: ti.u32, fram
     """out[i] = uniform(seed, frame, stream, offset + i)."""
     for i in range(out.shape[0]):
         out[i] = uniform(seed, frame, stream, offset + ti.cast(i, ti.u32))
+
+
+@ti.kernel
+def fill_uniform_f64(out: ti.types.ndarray(dtype=ti.f64, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32,
+                     offset: ti.u32):
+    """out[i] = uniform_f64(seed, frame, stream, offset + i)."""
+    for i in range(out.shape[0]):
+        out[i] = uniform_f64(seed, frame, stream, offset + ti.cast(i, ti.u32))
 
 
 @ti.kernel

@@ -62,7 +62,7 @@ def test_missing_backend_is_a_clear_error(tmp_path):
     assert res.returncode == 2 and "'cuda' is not available" in res.stderr and "available: cpu" in res.stderr
 
 
-@pytest.mark.parametrize("command", ["simulate", "evaluate"])
+@pytest.mark.parametrize("command", ["simulate", "evaluate", "track", "bench"])
 def test_help_explains_every_option(command):
     res = run_cli(command, "--help")
     assert res.returncode == 0

@@ -24,6 +24,15 @@ def test_hash_and_uniform_bit_identical(seed, frame, stream, offset):
     assert np.array_equal(taichi_draws("uniform", n, seed, frame, stream, offset), nrng.uniform(seed, frame, stream, index))
 
 
+def test_uniform_f64_matches_twin_and_is_uniform():
+    n = 100_000
+    t = np.zeros(n, np.float64)
+    trng.fill_uniform_f64(t, 4, 5, 6, 0)
+    np.testing.assert_array_equal(t, nrng.uniform_f64(4, 5, 6, np.arange(n)))
+    assert t.min() > 0 and t.max() < 1 and len(np.unique(t)) == n
+    assert abs(t.mean() - 0.5) < 4 * np.sqrt(1 / 12 / n)
+
+
 def test_normal_matches_twin():
     n = 50_000
     t = taichi_draws("normal", n, 9, 8, 7)

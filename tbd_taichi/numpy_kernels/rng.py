@@ -1,7 +1,7 @@
 """NumPy twin of ``tbd_taichi.kernels.rng``: the same bits for the same keys."""
 import numpy as np
 
-from ..kernels.rng import GOLDEN, INV_2_24, MIX1, MIX2, TWO_PI
+from ..kernels.rng import GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, TWO_PI
 
 _U32 = np.uint32
 
@@ -50,3 +50,13 @@ def normal(seed, frame, stream, index) -> np.ndarray:
     with np.errstate(over="ignore"):
         u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
     return np.sqrt(np.float32(-2.0) * np.log(u1)) * np.cos(np.float32(TWO_PI) * u2)
+
+
+def uniform_f64(seed, frame, stream, index) -> np.ndarray:
+    """U(0, 1) float64 with 53 random bits, the same values as the kernel."""
+    h = hash_key(seed, frame, stream, index)
+    with np.errstate(over="ignore"):
+        h2 = lowbias32(h + _U32(GOLDEN))
+    hi = (h >> _U32(5)).astype(np.float64)
+    lo = (h2 >> _U32(6)).astype(np.float64)
+    return (hi * 67108864.0 + lo + 0.5) * INV_2_53

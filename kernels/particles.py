@@ -1,0 +1,339 @@
+"""Batched particle filter kernels (SGDS-PF section 2.1, Eqs. 7–19) over one particle pool.
+
+The pool is a structure of arrays with two buffers (leading axis 2: resampling gathers
+from one into the other).  Every filter is a *group* that owns a fixed slab of slots
+[off_g, off_g + cap_g) of which the first n_g are live; kernels run over the whole pool,
+so one launch steps every group (every search block, every track).
+
+Random numbers come from the counter-based generator keyed on (seed, frame, stream,
+slot), so results do not depend on the thread count.  Segmented reductions are
+deterministic too: each group's slab is cut into tiles of TILE slots, a tile is reduced
+serially (tiles in parallel), and a group combines its tiles in order.  Cumulative
+weights are f64.  The NumPy twin is ``tbd_taichi.numpy_kernels.particles``.
+"""
+import math
+
+import taichi as ti
+
+from .rng import normal, uniform, uniform_f64
+
+TILE = 1024
+NEG_INF = -3.0e38
+TWO_PI = 2.0 * math.pi
+
+# random streams: one per use, so no two draws share a key
+S_EXIST, S_BIRTH_X, S_BIRTH_Y, S_BIRTH_SPEED, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL = range(1, 8)
+S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I, S_RESAMPLE = range(8, 14)
+
+# per-group sums of ``moments`` (f64)
+M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
+N_MOMENTS = 13
+STATE = ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")
+
+
+@ti.data_oriented
+class ParticleKernels:
+    """Fields and kernels of one particle pool; the scheduler is ``tbd_taichi.particles.ParticlePool``."""
+
+    def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool):
+        c, g = capacity, n_groups
+        self.capacity, self.serial = capacity, serial
+        f32 = lambda *shape: ti.field(ti.f32, shape=shape)  # noqa: E731
+        i32 = lambda *shape: ti.field(ti.i32, shape=shape)  # noqa: E731
+        f64 = lambda *shape: ti.field(ti.f64, shape=shape)  # noqa: E731
+        self.x, self.vx, self.y, self.vy, self.inten = f32(2, c), f32(2, c), f32(2, c), f32(2, c), f32(2, c)
+        self.e, self.tp, self.seq = i32(2, c), i32(2, c), i32(2, c)
+        self.logw, self.born, self.parent, self.cum = f32(c), i32(c), i32(c), f64(c)
+        self.slot_group = i32(c)
+        self.off, self.cap, self.n, self.n_out, self.kind = i32(g), i32(g), i32(g), i32(g), i32(g)
+        self.pb, self.pd = f32(g), f32(g)
+        self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
+        self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
+        self.gmax, self.gmax_e, self.gtotal, self.u0 = f32(g), f32(g), f64(g), f64(g)
+        self.gt0, self.gt1 = i32(g), i32(g)
+        self.tile_start, self.tile_group = i32(n_tiles), i32(n_tiles)
+        self.tile_max, self.tile_max_e, self.tile_total, self.tile_prefix = f32(n_tiles), f32(n_tiles), \
+            f64(n_tiles), f64(n_tiles)
+        self.tile_moments, self.moments = f64(n_tiles, N_MOMENTS), f64(g, N_MOMENTS)
+        self.map_pixel, self.map_cdf = i32(map_capacity), f64(map_capacity)
+        self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
+        self.z = f32(*frame_shape)
+
+    # ------------------------------------------------------------ helpers
+
+    @ti.func
+    def live(self, i: ti.i32) -> ti.i32:
+        g = self.slot_group[i]
+        return g >= 0 and i - self.off[g] < self.n[g]
+
+    @ti.func
+    def tile_end(self, t: ti.i32) -> ti.i32:
+        g = self.tile_group[t]
+        return ti.min(self.tile_start[t] + TILE, self.off[g] + self.n[g])
+
+    # ------------------------------------------------------------ Eqs. 7–10
+
+    @ti.kernel
+    def predict_existence(self, seed: ti.u32, frame: ti.i32, b: ti.i32):
+        """Step 1, Eqs. 7–8: E ← [u ≥ P_d] if E = 1, [u < P_b] if E = 0; ``born`` marks 0 → 1."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            if self.live(i):
+                g = self.slot_group[i]
+                u = uniform(seed, frame, S_EXIST, i)
+                e0 = self.e[b, i]
+                e1 = 0
+                if e0 == 1:
+                    e1 = ti.cast(u >= self.pd[g], ti.i32)
+                else:
+                    e1 = ti.cast(u < self.pb[g], ti.i32)
+                self.born[i] = ti.cast(e0 == 0 and e1 == 1, ti.i32)
+                self.e[b, i] = e1
+
+    @ti.func
+    def map_pixel_draw(self, g: ti.i32, v: ti.f64) -> ti.i32:
+        """First pixel of group g's proposal list whose cumulative weight exceeds v (binary search)."""
+        lo = self.map_off[g]
+        hi = lo + self.map_n[g] - 1
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.map_cdf[mid] > v:
+                hi = mid
+            else:
+                lo = mid + 1
+        return self.map_pixel[lo]
+
+    @ti.kernel
+    def draw_newborn(self, seed: ti.u32, frame: ti.i32, b: ti.i32, width: ti.i32):
+        """Step 2 for newborn particles (E 0 → 1): state from the group's birth proposal, Tp = 1 (Eq. 34).
+
+        kind 0: position uniform over [bx0, bx1) × [by0, by1); kind 1: a pixel drawn from the
+        group's proposal map, plus U(−½, ½) in x and y.  Speed U[0, vmax] in a uniform direction,
+        intensity U[imin, imax]; kind 2 (tracks) leaves newborns to the scheduler's copies.
+        """
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            if self.live(i) and self.born[i] == 1:
+                g = self.slot_group[i]
+                k = self.kind[g]
+                if k <= 1:
+                    ux = uniform(seed, frame, S_BIRTH_X, i)
+                    uy = uniform(seed, frame, S_BIRTH_Y, i)
+                    if k == 0:
+                        self.x[b, i] = self.bx0[g] + (self.bx1[g] - self.bx0[g]) * ux
+                        self.y[b, i] = self.by0[g] + (self.by1[g] - self.by0[g]) * uy
+                    else:
+                        p = self.map_pixel_draw(g, uniform_f64(seed, frame, S_BIRTH_PIXEL, i) * self.map_total[g])
+                        self.x[b, i] = ti.cast(p % width, ti.f32) + (ux - ti.f32(0.5))
+                        self.y[b, i] = ti.cast(p // width, ti.f32) + (uy - ti.f32(0.5))
+                    speed = self.vmax[g] * uniform(seed, frame, S_BIRTH_SPEED, i)
+                    angle = ti.f32(TWO_PI) * uniform(seed, frame, S_BIRTH_ANGLE, i)
+                    self.vx[b, i] = speed * ti.cos(angle)
+                    self.vy[b, i] = speed * ti.sin(angle)
+                    self.inten[b, i] = self.imin[g] + (self.imax[g] - self.imin[g]) * uniform(seed, frame, S_BIRTH_I, i)
+                    self.tp[b, i] = 1
+
+    @ti.kernel
+    def propagate(self, seed: ti.u32, frame: ti.i32, b: ti.i32, q1: ti.f32, q2: ti.f32, i_floor: ti.f32,
+                  width: ti.i32, height: ti.i32):
+        """Step 2 for existing particles (E 1 → 1), Eqs. 9–10: nearly constant velocity plus
+        Cholesky-factored noise of Q (Eq. 46, T = 1), I ← max(I + √q2·n, i_floor), Tp ← Tp + 1.
+        A particle whose position leaves the image (x ∉ [−½, W−½)) gets E = 0."""
+        c11 = ti.sqrt(q1 / ti.f32(3.0))
+        c21 = ti.sqrt(q1) * ti.f32(0.8660254037844386)
+        c22 = ti.sqrt(q1) * ti.f32(0.5)
+        sq2 = ti.sqrt(q2)
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            if self.live(i) and self.e[b, i] == 1 and self.born[i] == 0:
+                n1 = normal(seed, frame, S_NOISE_X, i)
+                n2 = normal(seed, frame, S_NOISE_VX, i)
+                n3 = normal(seed, frame, S_NOISE_Y, i)
+                n4 = normal(seed, frame, S_NOISE_VY, i)
+                n5 = normal(seed, frame, S_NOISE_I, i)
+                x = self.x[b, i] + self.vx[b, i] + c11 * n1
+                y = self.y[b, i] + self.vy[b, i] + c11 * n3
+                self.x[b, i] = x
+                self.y[b, i] = y
+                self.vx[b, i] += c21 * n1 + c22 * n2
+                self.vy[b, i] += c21 * n3 + c22 * n4
+                self.inten[b, i] = ti.max(self.inten[b, i] + sq2 * n5, i_floor)
+                self.tp[b, i] += 1
+                if x < -0.5 or x >= width - 0.5 or y < -0.5 or y >= height - 0.5:
+                    self.e[b, i] = 0
+
+    # ------------------------------------------------------------ Eqs. 11–15
+
+    @ti.kernel
+    def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32):
+        """Step 3, Eq. 15 in the log domain: for E = 1,
+        log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
+        over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
+        The Gaussian is separable, so h = a·gx·gy and Σh² = a²·Σgx²·Σgy²."""
+        h, w = self.z.shape[0], self.z.shape[1]
+        inv2s2 = ti.f32(1.0) / (ti.f32(2.0) * psf_sigma * psf_sigma)
+        norm = ti.f32(1.0) / (ti.f32(TWO_PI) * psf_sigma * psf_sigma)
+        inv_var = ti.f32(1.0) / (noise_sigma * noise_sigma)
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            if self.live(i):
+                lw = ti.f32(0.0)
+                if self.e[b, i] == 1:
+                    x, y = self.x[b, i], self.y[b, i]
+                    cx = ti.cast(ti.floor(x + 0.5), ti.i32)
+                    cy = ti.cast(ti.floor(y + 0.5), ti.i32)
+                    gx = ti.Vector([0.0] * 5, dt=ti.f32)
+                    gy = ti.Vector([0.0] * 5, dt=ti.f32)
+                    for k in ti.static(range(5)):
+                        px, py = cx + k - 2, cy + k - 2
+                        dx, dy = ti.cast(px, ti.f32) - x, ti.cast(py, ti.f32) - y
+                        gx[k] = ti.exp(-dx * dx * inv2s2) if 0 <= px < w else ti.f32(0.0)
+                        gy[k] = ti.exp(-dy * dy * inv2s2) if 0 <= py < h else ti.f32(0.0)
+                    sz = ti.f32(0.0)
+                    for j in ti.static(range(5)):
+                        row = ti.f32(0.0)
+                        for k in ti.static(range(5)):
+                            if gy[j] > 0 and gx[k] > 0:
+                                row += gx[k] * self.z[cy + j - 2, cx + k - 2]
+                        sz += gy[j] * row
+                    a = self.inten[b, i] * norm
+                    lw = (a * sz - ti.f32(0.5) * a * a * gx.dot(gx) * gy.dot(gy)) * inv_var
+                self.logw[i] = lw
+
+    # ------------------------------------------------------------ Eqs. 16–18, segmented and deterministic
+
+    @ti.kernel
+    def tile_maxima(self, b: ti.i32):
+        """Per tile: the largest log-weight, and the largest among E = 1 particles."""
+        ti.loop_config(serialize=self.serial)
+        for t in range(self.tile_start.shape[0]):
+            m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+            for i in range(self.tile_start[t], self.tile_end(t)):
+                m = ti.max(m, self.logw[i])
+                if self.e[b, i] == 1:
+                    me = ti.max(me, self.logw[i])
+            self.tile_max[t] = m
+            self.tile_max_e[t] = me
+
+    @ti.kernel
+    def group_maxima(self):
+        """Per group: max over its tiles (gmax normalises Eq. 16; gmax_e is the best E = 1 log-weight)."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+            for t in range(self.gt0[g], self.gt1[g]):
+                m = ti.max(m, self.tile_max[t])
+                me = ti.max(me, self.tile_max_e[t])
+            self.gmax[g] = m
+            self.gmax_e[g] = me
+
+    @ti.kernel
+    def tile_cumulative(self):
+        """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64."""
+        ti.loop_config(serialize=self.serial)
+        for t in range(self.tile_start.shape[0]):
+            g = self.tile_group[t]
+            s = ti.cast(0.0, ti.f64)
+            for i in range(self.tile_start[t], self.tile_end(t)):
+                s += ti.exp(ti.cast(self.logw[i], ti.f64) - ti.cast(self.gmax[g], ti.f64))
+                self.cum[i] = s
+            self.tile_total[t] = s
+
+    @ti.kernel
+    def group_prefix(self):
+        """Eq. 17 across tiles: exclusive prefix of tile totals per group, and the group total."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            s = ti.cast(0.0, ti.f64)
+            for t in range(self.gt0[g], self.gt1[g]):
+                self.tile_prefix[t] = s
+                s += self.tile_total[t]
+            self.gtotal[g] = s
+
+    @ti.func
+    def find_parent(self, g: ti.i32, v: ti.f64) -> ti.i32:
+        """The slot whose cumulative-weight interval holds v (Eq. 18): tile by its prefix, then slot."""
+        lo, hi = self.gt0[g], self.gt1[g] - 1
+        while lo < hi:  # last tile with prefix ≤ v
+            mid = (lo + hi + 1) // 2
+            if self.tile_prefix[mid] <= v:
+                lo = mid
+            else:
+                hi = mid - 1
+        t = lo
+        while t > self.gt0[g] and self.tile_start[t] >= self.tile_end(t):  # skip empty trailing tiles
+            t -= 1
+        r = v - self.tile_prefix[t]
+        a, z = self.tile_start[t], self.tile_end(t) - 1
+        while a < z:  # first slot with cum > r
+            mid = (a + z) // 2
+            if self.cum[mid] > r:
+                z = mid
+            else:
+                a = mid + 1
+        return a
+
+    @ti.kernel
+    def draw_parents(self, seed: ti.u32, frame: ti.i32, systematic: ti.i32):
+        """Eq. 18: for output slot m < n_out_g of group g, the parent holding u·Σw.
+        Multinomial: u_m i.i.d. U(0, 1) (53-bit); systematic: u_m = (m + u0_g)/n_out_g."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            g = self.slot_group[i]
+            if g >= 0:
+                m = i - self.off[g]
+                if m < self.n_out[g] and self.n[g] > 0:
+                    u = ti.cast(0.0, ti.f64)
+                    if systematic:
+                        u = (ti.cast(m, ti.f64) + self.u0[g]) / ti.cast(self.n_out[g], ti.f64)
+                    else:
+                        u = uniform_f64(seed, frame, S_RESAMPLE, i)
+                    self.parent[i] = self.find_parent(g, u * self.gtotal[g])
+
+    @ti.kernel
+    def gather(self, src: ti.i32):
+        """Copy each output slot's parent state from buffer src into buffer 1 − src; weights reset (1/L)."""
+        dst = 1 - src
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            g = self.slot_group[i]
+            if g >= 0 and i - self.off[g] < self.n_out[g] and self.n[g] > 0:
+                p = self.parent[i]
+                self.x[dst, i] = self.x[src, p]
+                self.vx[dst, i] = self.vx[src, p]
+                self.y[dst, i] = self.y[src, p]
+                self.vy[dst, i] = self.vy[src, p]
+                self.inten[dst, i] = self.inten[src, p]
+                self.e[dst, i] = self.e[src, p]
+                self.tp[dst, i] = self.tp[src, p]
+                self.seq[dst, i] = self.seq[src, p]
+                self.logw[i] = 0.0
+
+    # ------------------------------------------------------------ Eq. 19 and spreads
+
+    @ti.kernel
+    def tile_sums(self, b: ti.i32):
+        """Per tile (serially, in slot order): the sums behind Eq. 19, P(E), mean Tp and the covariance."""
+        ti.loop_config(serialize=self.serial)
+        for t in range(self.tile_start.shape[0]):
+            acc = ti.Vector([0.0] * N_MOMENTS, dt=ti.f64)
+            for i in range(self.tile_start[t], self.tile_end(t)):
+                e = ti.cast(self.e[b, i], ti.f64)
+                x = ti.cast(self.x[b, i], ti.f64)
+                y = ti.cast(self.y[b, i], ti.f64)
+                acc += ti.Vector([1.0, e, e * x, e * ti.cast(self.vx[b, i], ti.f64), e * y,
+                                  e * ti.cast(self.vy[b, i], ti.f64), e * ti.cast(self.inten[b, i], ti.f64),
+                                  ti.cast(self.tp[b, i], ti.f64), x, y, x * x, y * y, x * y], dt=ti.f64)
+            for k in ti.static(range(N_MOMENTS)):
+                self.tile_moments[t, k] = acc[k]
+
+    @ti.kernel
+    def group_sums(self):
+        """Per group: the tile sums added in tile order."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            for k in ti.static(range(N_MOMENTS)):
+                s = ti.cast(0.0, ti.f64)
+                for t in range(self.gt0[g], self.gt1[g]):
+                    s += self.tile_moments[t, k]
+                self.moments[g, k] = s

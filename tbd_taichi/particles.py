@@ -1,0 +1,289 @@
+"""The particle pool scheduler: many independent particle filters in one pool (SGDS-PF section 2.1).
+
+A pool holds G groups (one per search block or track).  Group g owns the fixed slab
+[off_g, off_g + cap_g) of slots and has n_g live particles; one kernel launch steps
+every group.  The scheduler here owns the bookkeeping (slabs, counts, capacities,
+birth proposals, the buffer that holds the current state); the kernels in
+``tbd_taichi.kernels.particles`` (or their NumPy twins) do the per-particle work.
+
+One filter step (:meth:`ParticlePool.step`), for every group at once:
+
+1. existence prediction, Eqs. 7–8 (P_b, P_d per group);
+2. newborn particles (E 0 → 1) drawn from the group's birth proposal: uniform over a
+   region, or from a per-pixel proposal map (the SGDS-PF hook); existing particles
+   propagated by the NCV model, Eqs. 9–10, with the process noise Q of Eq. 46
+   (q1 = 0.001, q2 = 0.01 by default: the simulator's own values, so the filter's
+   motion model matches the scenario it is tested on);
+3. log importance weights, Eq. 15 (5×5 window, PSF of Eq. 14, Σ and σ parameters);
+4. segmented normalisation, Eq. 16 (per-group log-sum-exp, cumulative sums in f64);
+5. segmented resampling, Eqs. 17–18: multinomial (the paper's L independent uniforms)
+   or systematic; a group's output count may differ from its input count;
+6. estimates per group (:meth:`ParticlePool.estimates`): Eq. 19 (mean over E = 1
+   particles), the existence probability ΣE/n, mean Tp and the positional covariance.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import backend
+from .errors import ParameterError
+
+ENGINES = ("taichi", "numpy")
+BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
+GROUP_PARAMS = ("pb", "pd", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
+SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
+
+
+@dataclass
+class GroupEstimates:
+    """Per-group estimates after a step (arrays of length G; NaN where a group has no E = 1 particle)."""
+
+    n: np.ndarray  # live particles
+    p_exist: np.ndarray  # ΣE / n, the existence probability
+    x: np.ndarray  # Eq. 19, px
+    vx: np.ndarray  # px/frame
+    y: np.ndarray
+    vy: np.ndarray
+    intensity: np.ndarray  # total intensity (Eq. 14 units)
+    tp_mean: np.ndarray  # mean presence count Tp
+    cov: np.ndarray  # (G, 2, 2) covariance of all particles' (x, y), px²
+    max_logw: np.ndarray  # largest log-weight of an E = 1 particle in the last step
+
+
+class ParticlePool:
+    """A pool of ``len(capacities)`` particle filters with fixed capacities.
+
+    ``frame_shape`` is (H, W) of the frames the filters weigh; ``engine`` is "taichi"
+    or "numpy"; ``seed`` keys every random draw.
+    """
+
+    def __init__(self, capacities, frame_shape, engine: str = "taichi", seed: int = 0, map_capacity: int = 0,
+                 q1: float = 0.001, q2: float = 0.01, psf_sigma: float = 0.7, noise_sigma: float = 1.0,
+                 intensity_floor: float = 0.1, arch: str | None = None):
+        caps = np.asarray(capacities, dtype=np.int64).reshape(-1)
+        if engine not in ENGINES:
+            raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        if caps.size == 0 or (caps < 1).any():
+            raise ParameterError(f"every group needs a capacity ≥ 1, got {caps.tolist()}")
+        if min(q1, q2) < 0 or psf_sigma <= 0 or noise_sigma <= 0:
+            raise ParameterError("q1, q2 must be ≥ 0 and psf_sigma, noise_sigma > 0")
+        from .kernels.particles import TILE
+
+        self.engine_name, self.seed = engine, int(seed) & 0xFFFFFFFF
+        self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
+        self.caps = caps.astype(np.int32)
+        self.off = (np.cumsum(caps) - caps).astype(np.int32)
+        self.capacity = int(caps.sum())
+        self.n_groups = len(caps)
+        self.q1, self.q2, self.psf_sigma, self.noise_sigma = q1, q2, psf_sigma, noise_sigma
+        self.intensity_floor = intensity_floor
+        tiles = [(g, int(self.off[g]) + k) for g in range(self.n_groups) for k in range(0, int(caps[g]), TILE)]
+        tile_group = np.array([t[0] for t in tiles], np.int32)
+        gt0 = np.searchsorted(tile_group, np.arange(self.n_groups)).astype(np.int32)
+        gt1 = np.searchsorted(tile_group, np.arange(self.n_groups), side="right").astype(np.int32)
+        self.map_capacity = max(int(map_capacity), 1)
+        serial = self.capacity <= SERIAL_PARTICLES
+        if engine == "taichi":
+            backend.ensure_init(arch)
+            serial = serial and backend.current().arch == "cpu"
+            from .kernels.particles import ParticleKernels as Kernels
+        else:
+            from .numpy_kernels.particles import NumpyParticleKernels as Kernels
+        self.k = Kernels(self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial)
+        slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)
+        self._put("slot_group", slot_group)
+        self._put("off", self.off)
+        self._put("cap", self.caps)
+        self._put("tile_group", tile_group)
+        self._put("tile_start", np.array([t[1] for t in tiles], np.int32))
+        self._put("gt0", gt0)
+        self._put("gt1", gt1)
+        self.counts = np.zeros(self.n_groups, np.int32)
+        self._put("n", self.counts)
+        self.buf = 0
+        self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
+        self.kinds = np.zeros(self.n_groups, np.int32)
+
+    # ------------------------------------------------------------ host ↔ engine
+
+    def _put(self, name: str, array: np.ndarray) -> None:
+        target = getattr(self.k, name)
+        if isinstance(target, np.ndarray):
+            target[...] = array
+        else:
+            from taichi.lang.util import to_numpy_type
+
+            target.from_numpy(np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype)))
+
+    def _get(self, name: str) -> np.ndarray:
+        target = getattr(self.k, name)
+        return target.copy() if isinstance(target, np.ndarray) else target.to_numpy()
+
+    # ------------------------------------------------------------ configuration
+
+    def configure_groups(self, groups, kind: str = "uniform", pb: float = 0.05, pd: float = 0.05,
+                         region=None, vmax: float = 1.0, intensity=(1.0, 10.0)) -> None:
+        """Set the birth/death model and birth proposal of ``groups`` (indices).
+
+        ``region`` = (x0, x1, y0, y1) px for uniform births (default: the whole image,
+        [−½, W−½) × [−½, H−½)); ``vmax`` px/frame; ``intensity`` = (I_min, I_max).
+        """
+        if kind not in BIRTH_KINDS:
+            raise ParameterError(f"birth kind must be one of {', '.join(BIRTH_KINDS)}, got {kind!r}")
+        if not (0 <= pb <= 1 and 0 <= pd <= 1) or vmax < 0 or intensity[0] > intensity[1]:
+            raise ParameterError("need 0 ≤ pb, pd ≤ 1, vmax ≥ 0 and I_min ≤ I_max")
+        h, w = self.frame_shape
+        x0, x1, y0, y1 = region if region is not None else (-0.5, w - 0.5, -0.5, h - 0.5)
+        groups = np.atleast_1d(np.asarray(groups, dtype=np.int64))
+        values = dict(pb=pb, pd=pd, bx0=x0, bx1=x1, by0=y0, by1=y1, vmax=vmax, imin=intensity[0], imax=intensity[1])
+        for name, value in values.items():
+            self.params[name][groups] = value
+            self._put(name, self.params[name])
+        self.kinds[groups] = BIRTH_KINDS[kind]
+        self._put("kind", self.kinds)
+
+    def set_proposal_map(self, per_group: dict) -> None:
+        """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64."""
+        pixels, cdf = [], []
+        off = np.zeros(self.n_groups, np.int32)
+        count = np.zeros(self.n_groups, np.int32)
+        total = np.zeros(self.n_groups)
+        pos = 0
+        for g in range(self.n_groups):
+            pix, wts = per_group.get(g, (np.zeros(0, np.int64), np.zeros(0)))
+            pix, wts = np.asarray(pix, np.int32), np.asarray(wts, np.float64)
+            off[g], count[g] = pos, len(pix)
+            if len(pix):
+                c = np.cumsum(wts)
+                pixels.append(pix)
+                cdf.append(c)
+                total[g] = c[-1]
+            pos += len(pix)
+        if pos > self.map_capacity:
+            raise ParameterError(f"proposal maps hold {pos} pixels, more than the pool's map capacity {self.map_capacity}")
+        for name, value in (("map_off", off), ("map_n", count), ("map_total", total)):
+            self._put(name, value)
+        if pos:
+            full_pix = np.zeros(self.map_capacity, np.int32)
+            full_cdf = np.zeros(self.map_capacity)
+            full_pix[:pos], full_cdf[:pos] = np.concatenate(pixels), np.concatenate(cdf)
+            self._put("map_pixel", full_pix)
+            self._put("map_cdf", full_cdf)
+
+    def set_counts(self, counts) -> None:
+        """Set the live particle count of every group (checked against its capacity)."""
+        counts = np.asarray(counts, dtype=np.int64).reshape(-1)
+        self._check_counts(counts, "live count")
+        self.counts = counts.astype(np.int32)
+        self._put("n", self.counts)
+
+    def _check_counts(self, counts: np.ndarray, what: str) -> None:
+        if counts.shape != (self.n_groups,):
+            raise ParameterError(f"need one {what} per group ({self.n_groups}), got {counts.shape}")
+        over = np.flatnonzero((counts > self.caps) | (counts < 0))
+        if over.size:
+            g = int(over[0])
+            raise ParameterError(f"group {g}: {what} {int(counts[g])} exceeds its capacity {int(self.caps[g])} "
+                                 f"(or is negative); the pool is unchanged")
+
+    # ------------------------------------------------------------ state
+
+    def state(self) -> dict:
+        """Live particles of the current buffer: arrays x, vx, y, vy, inten, e, tp, seq, group, slot, logw."""
+        slots = np.concatenate([self.off[g] + np.arange(self.counts[g]) for g in range(self.n_groups)]).astype(np.int64)
+        out = {name: self._get(name)[self.buf][slots] for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
+        out.update(group=np.repeat(np.arange(self.n_groups), self.counts), slot=slots, logw=self._get("logw")[slots])
+        return out
+
+    def set_state(self, group_states: dict) -> None:
+        """Load particles: {group: dict of arrays x, vx, y, vy, inten, e, tp[, seq]}; sets the live counts."""
+        counts = self.counts.astype(np.int64).copy()
+        for g, st in group_states.items():
+            counts[g] = len(st["x"])
+        self._check_counts(counts, "particle count")
+        arrays = {name: self._get(name) for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
+        for g, st in group_states.items():
+            s = slice(int(self.off[g]), int(self.off[g]) + len(st["x"]))
+            for name, arr in arrays.items():
+                arr[self.buf, s] = st.get(name, 0)
+        for name, arr in arrays.items():
+            self._put(name, arr)
+        self.set_counts(counts)
+
+    # ------------------------------------------------------------ one step
+
+    def load_frame(self, z: np.ndarray) -> None:
+        """The normalised frame the next weights use (H, W), float32."""
+        z = np.asarray(z, dtype=np.float32)
+        if z.shape != self.frame_shape:
+            raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
+        self._put("z", z)
+
+    def predict(self, frame: int) -> None:
+        """Steps 1–2: existence (Eqs. 7–8), newborn draws, NCV propagation (Eqs. 9–10)."""
+        k, h, w = self.k, self.frame_shape[0], self.frame_shape[1]
+        k.predict_existence(self.seed, frame, self.buf)
+        k.draw_newborn(self.seed, frame, self.buf, w)
+        k.propagate(self.seed, frame, self.buf, self.q1, self.q2, self.intensity_floor, w, h)
+
+    def weigh(self) -> None:
+        """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
+        k = self.k
+        k.log_weights(self.buf, self.psf_sigma, self.noise_sigma)
+        k.tile_maxima(self.buf)
+        k.group_maxima()
+        k.tile_cumulative()
+        k.group_prefix()
+
+    def resample(self, frame: int, n_out=None, systematic: bool = False) -> None:
+        """Step 5 (Eqs. 17–18): each group draws ``n_out[g]`` particles (default: its live count)."""
+        n_out = self.counts.copy() if n_out is None else np.asarray(n_out, dtype=np.int64).reshape(-1)
+        self._check_counts(n_out, "resampled count")
+        n_out = np.where(self.counts > 0, n_out, 0).astype(np.int32)
+        self._put("n_out", n_out)
+        if systematic:
+            from .numpy_kernels import rng
+
+            self._put("u0", rng.uniform_f64(self.seed, frame, 99, np.arange(self.n_groups)))
+        self.k.draw_parents(self.seed, frame, int(systematic))
+        self.k.gather(self.buf)
+        self.buf = 1 - self.buf
+        self.set_counts(n_out)
+
+    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False) -> None:
+        """One full filter step on normalised frame ``z`` for every group."""
+        self.load_frame(z)
+        self.predict(frame)
+        self.weigh()
+        self.resample(frame, n_out, systematic)
+
+    def normalised_weights(self) -> np.ndarray:
+        """Eq. 16 per live particle, in :meth:`state` order (for tests and diagnostics)."""
+        lw, gmax, total = self._get("logw"), self._get("gmax"), self._get("gtotal")
+        out = []
+        for g in range(self.n_groups):
+            s = slice(int(self.off[g]), int(self.off[g] + self.counts[g]))
+            out.append(np.exp(lw[s].astype(np.float64) - np.float64(gmax[g])) / total[g])
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def estimates(self) -> GroupEstimates:
+        """Eq. 19, existence probability, mean Tp and covariance per group (current buffer)."""
+        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EY, M_N, M_TP, M_X, M_XX, M_XY, M_Y,
+                                        M_YY)
+
+        self.k.tile_sums(self.buf)
+        self.k.group_sums()
+        m = self._get("moments")
+        n, ne = m[:, M_N], m[:, M_E]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = lambda col, d: np.where(d > 0, m[:, col] / d, np.nan)  # noqa: E731
+            mx, my = mean(M_X, n), mean(M_Y, n)
+            cov = np.empty((self.n_groups, 2, 2))
+            cov[:, 0, 0] = mean(M_XX, n) - mx * mx
+            cov[:, 1, 1] = mean(M_YY, n) - my * my
+            cov[:, 0, 1] = cov[:, 1, 0] = mean(M_XY, n) - mx * my
+            return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), mean(M_EX, ne),
+                                  mean(M_EVX, ne), mean(M_EY, ne), mean(M_EVY, ne), mean(M_EI, ne), mean(M_TP, n), cov,
+                                  self._get("gmax_e").astype(np.float64))

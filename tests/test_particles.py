@@ -1,0 +1,265 @@
+"""Particle pool kernels (SGDS-PF Eqs. 7–19): Taichi against the NumPy twin, brute force and statistics."""
+import math
+
+import numpy as np
+import pytest
+
+import tbd_taichi
+from tbd_taichi.errors import ParameterError
+from tbd_taichi.particles import ParticlePool
+
+SHAPE = (23, 31)  # odd, not a multiple of anything
+CAPS = [700, 1500, 300]
+
+
+def random_states(rng, caps, shape, p_exist=0.6):
+    """Random particle states per group, positions covering the borders and just outside."""
+    h, w = shape
+    out = {}
+    for g, cap in enumerate(caps):
+        n = cap - 17 * g  # some groups not full
+        out[g] = dict(x=rng.uniform(-0.4, w - 0.6, n).astype(np.float32), y=rng.uniform(-0.4, h - 0.6, n).astype(np.float32),
+                      vx=rng.uniform(-1, 1, n).astype(np.float32), vy=rng.uniform(-1, 1, n).astype(np.float32),
+                      inten=rng.uniform(0.5, 12, n).astype(np.float32), e=(rng.random(n) < p_exist).astype(np.int32),
+                      tp=rng.integers(0, 9, n).astype(np.int32), seq=rng.integers(0, 5, n).astype(np.int32))
+    return out
+
+
+def make_pools(rng, caps=CAPS, shape=SHAPE, **kw):
+    states = random_states(rng, caps, shape)
+    z = rng.standard_normal(shape).astype(np.float32)
+    z[5, 7] = 40.0  # an extreme pixel
+    pools = []
+    for engine in ("taichi", "numpy"):
+        p = ParticlePool(caps, shape, engine=engine, seed=11, map_capacity=64, **kw)
+        p.configure_groups([0, 2], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([1], "map", pb=0.3, pd=0.2, intensity=(2.0, 9.0), vmax=0.5)
+        p.set_proposal_map({1: (np.array([3 * shape[1] + 4, 10 * shape[1] + 20, 22 * shape[1] + 30]),
+                                np.array([0.2, 0.5, 0.3]))})
+        p.set_state(states)
+        p.load_frame(z)
+        pools.append(p)
+    return pools, z
+
+
+def assert_states_match(a, b, rtol=1e-5, atol=1e-5):
+    sa, sb = a.state(), b.state()
+    for key in ("e", "tp", "seq", "group", "slot"):
+        np.testing.assert_array_equal(sa[key], sb[key], err_msg=key)
+    for key in ("x", "vx", "y", "vy", "inten", "logw"):
+        np.testing.assert_allclose(sa[key], sb[key], rtol=rtol, atol=atol, err_msg=key)
+
+
+def test_every_stage_matches_the_numpy_twin(rng):
+    (t, n), _ = make_pools(rng)
+    for frame in range(3):
+        for pool in (t, n):
+            pool.predict(frame)
+        assert_states_match(t, n)
+        np.testing.assert_array_equal(t._get("born"), n._get("born"))
+        for pool in (t, n):
+            pool.weigh()
+        assert_states_match(t, n, rtol=2e-5, atol=2e-5)  # f32 exp differs by ulps
+        np.testing.assert_allclose(t.normalised_weights(), n.normalised_weights(), rtol=1e-4, atol=1e-12)
+        for pool in (t, n):
+            pool.resample(frame, n_out=[600, 1500, 100])
+        np.testing.assert_array_equal(t._get("parent")[:2300], n._get("parent")[:2300])
+        assert_states_match(t, n)
+    et, en = t.estimates(), n.estimates()
+    np.testing.assert_array_equal(et.p_exist, en.p_exist)  # integer counts
+    np.testing.assert_array_equal(et.tp_mean, en.tp_mean)
+    for field in ("x", "y", "vx", "vy", "intensity"):  # means of states that agree to f32 ulps
+        np.testing.assert_allclose(getattr(et, field), getattr(en, field), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(et.cov, en.cov, rtol=1e-5, atol=1e-6)
+
+
+def test_existence_prediction_statistics():
+    n = 200_000
+    pool = ParticlePool([n], (10, 10), engine="taichi", seed=3)
+    pool.configure_groups([0], pb=0.1, pd=0.25)
+    e0 = (np.arange(n) % 2).astype(np.int32)
+    pool.set_state({0: dict(x=np.full(n, 5.0), y=np.full(n, 5.0), vx=0 * e0, vy=0 * e0, inten=np.ones(n), e=e0, tp=e0)})
+    pool.k.predict_existence(pool.seed, 0, pool.buf)
+    e1 = pool.state()["e"]
+    born = pool._get("born")[:n]
+    sd = lambda p: 4 * math.sqrt(p * (1 - p) / (n / 2))  # noqa: E731  4 standard errors
+    assert abs(e1[e0 == 0].mean() - 0.1) < sd(0.1)  # Eq. 7
+    assert abs(1 - e1[e0 == 1].mean() - 0.25) < sd(0.25)  # Eq. 8
+    np.testing.assert_array_equal(born, (e0 == 0) & (e1 == 1))
+
+
+def test_newborn_uniform_and_from_map():
+    n, shape = 120_000, (40, 50)
+    pool = ParticlePool([n, n], shape, engine="taichi", seed=4, map_capacity=8)
+    pool.configure_groups([0], "uniform", pb=1.0, region=(2.0, 12.0, 5.0, 25.0), vmax=0.8, intensity=(3.0, 5.0))
+    pool.configure_groups([1], "map", pb=1.0, vmax=0.8, intensity=(3.0, 5.0))
+    pix = np.array([0, 7 * 50 + 9, 39 * 50 + 49])
+    pool.set_proposal_map({1: (pix, np.array([1.0, 2.0, 5.0]))})
+    zero = np.zeros(n)
+    pool.set_state({g: dict(x=zero, y=zero, vx=zero, vy=zero, inten=zero + 1, e=zero.astype(np.int32), tp=zero)
+                    for g in (0, 1)})
+    pool.predict(0)
+    s = pool.state()
+    g0, g1 = s["group"] == 0, s["group"] == 1
+    assert np.all(s["tp"] == 1) and np.all(s["e"][g0 | g1] == 1 - 0 * s["e"][g0 | g1])
+    x, y = s["x"][g0], s["y"][g0]
+    assert x.min() >= 2 and x.max() < 12 and y.min() >= 5 and y.max() < 25
+    assert abs(x.mean() - 7) < 4 * 10 / math.sqrt(12 * n) and abs(np.var(x) - 100 / 12) < 0.1
+    speed = np.hypot(s["vx"], s["vy"])
+    assert speed.max() <= 0.8 + 1e-6 and abs(speed.mean() - 0.4) < 0.01
+    assert s["inten"].min() >= 3 and s["inten"].max() < 5
+    # from the map: pixel counts ∝ weights 1:2:5 (chi-square, 2 dof, P(> 13.8) = 0.001)
+    px = np.floor(s["x"][g1] + 0.5).astype(int) + 50 * np.floor(s["y"][g1] + 0.5).astype(int)
+    counts = np.array([(px == p).sum() for p in pix])
+    assert counts.sum() == n
+    expected = n * np.array([1, 2, 5]) / 8
+    assert ((counts - expected) ** 2 / expected).sum() < 13.8
+    assert np.all(np.abs(s["x"][g1] - np.floor(s["x"][g1] + 0.5)) <= 0.5)
+
+
+def test_propagation_reproduces_ncv_moments():
+    n, q1, q2 = 200_000, 0.004, 0.02
+    pool = ParticlePool([n], (400, 400), engine="taichi", seed=6, q1=q1, q2=q2)
+    pool.configure_groups([0], pb=0.0, pd=0.0)
+    x0, v0 = np.full(n, 200.0), np.full(n, 0.7)
+    one = np.ones(n, np.int32)
+    pool.set_state({0: dict(x=x0, y=x0, vx=v0, vy=-v0, inten=np.full(n, 5.0), e=one, tp=one)})
+    pool.predict(0)
+    s = pool.state()
+    dx, dvx = s["x"] - 200.7, s["vx"] - 0.7
+    dy, dvy = s["y"] - 199.3, s["vy"] + 0.7
+    tol = 4 * math.sqrt(2 / n)  # relative s.e. of a variance
+    assert np.var(dx) == pytest.approx(q1 / 3, rel=tol) and np.var(dy) == pytest.approx(q1 / 3, rel=tol)
+    assert np.var(dvx) == pytest.approx(q1, rel=tol) and np.var(dvy) == pytest.approx(q1, rel=tol)
+    assert np.mean(dx * dvx) == pytest.approx(q1 / 2, rel=2 * tol)
+    assert np.var(s["inten"] - 5.0) == pytest.approx(q2, rel=tol)
+    assert abs(np.corrcoef(dx, dy)[0, 1]) < 4 / math.sqrt(n)
+    assert np.all(s["tp"] == 2)
+
+
+def test_particles_leaving_the_image_lose_existence():
+    pool = ParticlePool([2], (10, 10), engine="numpy", seed=1, q1=0.0, q2=0.0)
+    pool.configure_groups([0], pb=0.0, pd=0.0)
+    one = np.ones(2, np.int32)
+    pool.set_state({0: dict(x=np.array([9.3, 5.0]), y=np.array([5.0, 5.0]), vx=np.array([0.5, 0.5]),
+                            vy=np.zeros(2), inten=np.ones(2), e=one, tp=one)})
+    pool.predict(0)
+    np.testing.assert_array_equal(pool.state()["e"], [0, 1])
+
+
+def brute_force_log_weight(z, x, y, inten, psf_sigma=0.7, sigma=1.0):
+    """Eqs. 11–15 term by term in float64 over the 5×5 window (in-image pixels only)."""
+    h, w = z.shape
+    cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
+    total = 0.0
+    for j in range(cy - 2, cy + 3):
+        for i in range(cx - 2, cx + 3):
+            if 0 <= i < w and 0 <= j < h:
+                hij = inten / (2 * math.pi * psf_sigma ** 2) * math.exp(-((i - x) ** 2 + (j - y) ** 2) / (2 * psf_sigma ** 2))
+                total += -hij * (hij - 2 * z[j, i]) / (2 * sigma ** 2)
+    return total
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_log_weights_equal_brute_force(rng, engine):
+    (t, n), z = make_pools(rng, psf_sigma=0.9, noise_sigma=1.3)
+    pool = t if engine == "taichi" else n
+    pool.weigh()
+    s = pool.state()
+    ref = np.array([brute_force_log_weight(z, x, y, i, 0.9, 1.3) if e else 0.0
+                    for x, y, i, e in zip(s["x"], s["y"], s["inten"], s["e"])])
+    np.testing.assert_allclose(s["logw"], ref, rtol=2e-5, atol=2e-4)  # f32: 25 terms of size ≤ |I·z|
+
+
+def test_segmented_normalisation_is_a_softmax_per_group(rng):
+    (t, _), _ = make_pools(rng)
+    t.weigh()
+    s, w = t.state(), t.normalised_weights()
+    for g in range(len(CAPS)):
+        lw = s["logw"][s["group"] == g].astype(np.float64)
+        ref = np.exp(lw - lw.max()) / np.exp(lw - lw.max()).sum()
+        np.testing.assert_allclose(w[s["group"] == g], ref, rtol=1e-6)
+        assert w[s["group"] == g].sum() == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("systematic", [False, True])
+def test_resampling_is_unbiased(systematic):
+    """Mean offspring count of each parent over R resamplings ≈ N_out·w (Eq. 18)."""
+    n_in, n_out, reps = 400, 600, 300
+    rng = np.random.default_rng(2)
+    logw = rng.normal(0, 1.5, n_in).astype(np.float32)
+    pool = ParticlePool([n_out], (8, 8), engine="taichi", seed=9)
+    pool.configure_groups([0], pb=0.0, pd=0.0)
+    w = np.exp(logw.astype(np.float64) - logw.max())
+    w /= w.sum()
+    counts = np.zeros(n_in)
+    for r in range(reps):
+        pool.set_counts([n_in])
+        lw = pool._get("logw")
+        lw[:n_in] = logw
+        pool._put("logw", lw)
+        pool.k.tile_maxima(pool.buf)
+        pool.k.group_maxima()
+        pool.k.tile_cumulative()
+        pool.k.group_prefix()
+        pool.resample(r, n_out=[n_out], systematic=systematic)
+        counts += np.bincount(pool._get("parent")[:n_out], minlength=n_in)
+    mean = counts / reps
+    expected = n_out * w
+    # multinomial: var = N·w(1−w) per draw set; systematic has smaller variance, so the same bound holds
+    se = np.sqrt(n_out * w * (1 - w) / reps)
+    assert np.all(np.abs(mean - expected) < 5 * se + 1e-9)
+    z = (mean - expected) / np.maximum(se, 1e-12)
+    assert abs(z.mean()) < 0.3  # no systematic bias across parents
+    assert pool.counts[0] == n_out  # output count differs from input count
+
+
+def test_capacity_overflow_is_a_clear_error_and_changes_nothing(rng):
+    (t, _), _ = make_pools(rng)
+    before = t.state()
+    with pytest.raises(ParameterError, match=r"group 1: resampled count 1501 exceeds its capacity 1500"):
+        t.resample(0, n_out=[600, 1501, 100])
+    with pytest.raises(ParameterError, match="group 0: live count 701"):
+        t.set_counts([701, 0, 0])
+    after = t.state()
+    for key in before:
+        np.testing.assert_array_equal(before[key], after[key])
+    with pytest.raises(ParameterError, match="capacity"):
+        ParticlePool([10, 0], (5, 5))
+
+
+def test_estimates_eq19_and_covariance(rng):
+    (t, _), _ = make_pools(rng)
+    est, s = t.estimates(), t.state()
+    for g in range(len(CAPS)):
+        sel = s["group"] == g
+        e = s["e"][sel] == 1
+        assert est.p_exist[g] == pytest.approx(e.mean())
+        assert est.x[g] == pytest.approx(s["x"][sel][e].mean(), rel=1e-6)  # Eq. 19
+        assert est.intensity[g] == pytest.approx(s["inten"][sel][e].mean(), rel=1e-6)
+        assert est.tp_mean[g] == pytest.approx(s["tp"][sel].mean())
+        cov = np.cov(np.stack([s["x"][sel], s["y"][sel]]).astype(np.float64), bias=True)
+        np.testing.assert_allclose(est.cov[g], cov, rtol=1e-6, atol=1e-9)
+
+
+def test_same_results_with_one_and_two_threads(rng):
+    states = random_states(rng, CAPS, SHAPE)
+    z = rng.standard_normal(SHAPE).astype(np.float32)
+
+    def run():
+        p = ParticlePool(CAPS, SHAPE, engine="taichi", seed=5)
+        p.configure_groups([0, 1, 2], pb=0.2, pd=0.1, intensity=(2.0, 9.0))
+        p.set_state(states)
+        for f in range(4):
+            p.step(f, z)
+        return p.state()
+
+    try:
+        tbd_taichi.init("cpu", threads=1)
+        one = run()
+        tbd_taichi.init("cpu", threads=2)
+        two = run()
+    finally:
+        tbd_taichi.init("cpu")
+    for key in one:
+        np.testing.assert_array_equal(one[key], two[key])
