@@ -15,7 +15,7 @@ import math
 
 import taichi as ti
 
-from .rng import normal, uniform, uniform_f64
+from .rng import key_prefix, normal_pair, uniform_at, uniform_f64_at
 
 TILE = 1024
 NEG_INF = -3.0e38
@@ -23,7 +23,7 @@ TWO_PI = 2.0 * math.pi
 
 # random streams: one per use, so no two draws share a key
 S_EXIST, S_BIRTH_X, S_BIRTH_Y, S_BIRTH_SPEED, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL = range(1, 8)
-S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I, S_RESAMPLE = range(8, 14)
+S_NOISE_XY, S_NOISE_V, S_NOISE_I, S_RESAMPLE = range(8, 12)
 
 # per-group sums of ``moments`` (f64)
 M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
@@ -76,11 +76,12 @@ class ParticleKernels:
     @ti.kernel
     def predict_existence(self, seed: ti.u32, frame: ti.i32, b: ti.i32):
         """Step 1, Eqs. 7–8: E ← [u ≥ P_d] if E = 1, [u < P_b] if E = 0; ``born`` marks 0 → 1."""
+        key = key_prefix(seed, frame, S_EXIST)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i):
                 g = self.slot_group[i]
-                u = uniform(seed, frame, S_EXIST, i)
+                u = uniform_at(key, i)
                 e0 = self.e[b, i]
                 e1 = 0
                 if e0 == 1:
@@ -111,26 +112,29 @@ class ParticleKernels:
         group's proposal map, plus U(−½, ½) in x and y.  Speed U[0, vmax] in a uniform direction,
         intensity U[imin, imax]; kind 2 (tracks) leaves newborns to the scheduler's copies.
         """
+        kx, ky = key_prefix(seed, frame, S_BIRTH_X), key_prefix(seed, frame, S_BIRTH_Y)
+        ks, ka = key_prefix(seed, frame, S_BIRTH_SPEED), key_prefix(seed, frame, S_BIRTH_ANGLE)
+        ki, kp = key_prefix(seed, frame, S_BIRTH_I), key_prefix(seed, frame, S_BIRTH_PIXEL)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i) and self.born[i] == 1:
                 g = self.slot_group[i]
                 k = self.kind[g]
                 if k <= 1:
-                    ux = uniform(seed, frame, S_BIRTH_X, i)
-                    uy = uniform(seed, frame, S_BIRTH_Y, i)
+                    ux = uniform_at(kx, i)
+                    uy = uniform_at(ky, i)
                     if k == 0:
                         self.x[b, i] = self.bx0[g] + (self.bx1[g] - self.bx0[g]) * ux
                         self.y[b, i] = self.by0[g] + (self.by1[g] - self.by0[g]) * uy
                     else:
-                        p = self.map_pixel_draw(g, uniform_f64(seed, frame, S_BIRTH_PIXEL, i) * self.map_total[g])
+                        p = self.map_pixel_draw(g, uniform_f64_at(kp, i) * self.map_total[g])
                         self.x[b, i] = ti.cast(p % width, ti.f32) + (ux - ti.f32(0.5))
                         self.y[b, i] = ti.cast(p // width, ti.f32) + (uy - ti.f32(0.5))
-                    speed = self.vmax[g] * uniform(seed, frame, S_BIRTH_SPEED, i)
-                    angle = ti.f32(TWO_PI) * uniform(seed, frame, S_BIRTH_ANGLE, i)
+                    speed = self.vmax[g] * uniform_at(ks, i)
+                    angle = ti.f32(TWO_PI) * uniform_at(ka, i)
                     self.vx[b, i] = speed * ti.cos(angle)
                     self.vy[b, i] = speed * ti.sin(angle)
-                    self.inten[b, i] = self.imin[g] + (self.imax[g] - self.imin[g]) * uniform(seed, frame, S_BIRTH_I, i)
+                    self.inten[b, i] = self.imin[g] + (self.imax[g] - self.imin[g]) * uniform_at(ki, i)
                     self.tp[b, i] = 1
 
     @ti.kernel
@@ -143,14 +147,15 @@ class ParticleKernels:
         c21 = ti.sqrt(q1) * ti.f32(0.8660254037844386)
         c22 = ti.sqrt(q1) * ti.f32(0.5)
         sq2 = ti.sqrt(q2)
+        kxy, kv, ki = key_prefix(seed, frame, S_NOISE_XY), key_prefix(seed, frame, S_NOISE_V), \
+            key_prefix(seed, frame, S_NOISE_I)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i) and self.e[b, i] == 1 and self.born[i] == 0:
-                n1 = normal(seed, frame, S_NOISE_X, i)
-                n2 = normal(seed, frame, S_NOISE_VX, i)
-                n3 = normal(seed, frame, S_NOISE_Y, i)
-                n4 = normal(seed, frame, S_NOISE_VY, i)
-                n5 = normal(seed, frame, S_NOISE_I, i)
+                p13 = normal_pair(kxy, i)
+                p24 = normal_pair(kv, i)
+                n1, n3, n2, n4 = p13[0], p13[1], p24[0], p24[1]
+                n5 = normal_pair(ki, i)[0]
                 x = self.x[b, i] + self.vx[b, i] + c11 * n1
                 y = self.y[b, i] + self.vy[b, i] + c11 * n3
                 self.x[b, i] = x
@@ -277,6 +282,7 @@ class ParticleKernels:
     def draw_parents(self, seed: ti.u32, frame: ti.i32, systematic: ti.i32):
         """Eq. 18: for output slot m < n_out_g of group g, the parent holding u·Σw.
         Multinomial: u_m i.i.d. U(0, 1) (53-bit); systematic: u_m = (m + u0_g)/n_out_g."""
+        key = key_prefix(seed, frame, S_RESAMPLE)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             g = self.slot_group[i]
@@ -287,8 +293,33 @@ class ParticleKernels:
                     if systematic:
                         u = (ti.cast(m, ti.f64) + self.u0[g]) / ti.cast(self.n_out[g], ti.f64)
                     else:
-                        u = uniform_f64(seed, frame, S_RESAMPLE, i)
+                        u = uniform_f64_at(key, i)
                     self.parent[i] = self.find_parent(g, u * self.gtotal[g])
+
+    @ti.kernel
+    def set_counts(self, which: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """n (which = 0) or n_out (which = 1) from the host, in one small serial launch."""
+        ti.loop_config(serialize=True)
+        for g in range(counts.shape[0]):
+            if which == 0:
+                self.n[g] = counts[g]
+            else:
+                self.n_out[g] = ti.select(self.n[g] > 0, counts[g], 0)
+
+    @ti.kernel
+    def commit_counts(self):
+        """After gathering: every group's live count becomes its resampled count."""
+        ti.loop_config(serialize=True)
+        for g in range(self.n.shape[0]):
+            self.n[g] = self.n_out[g]
+
+    @ti.kernel
+    def load_frame(self, z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """The normalised frame the weights read."""
+        ti.loop_config(serialize=self.serial)
+        for y in range(z.shape[0]):
+            for x in range(z.shape[1]):
+                self.z[y, x] = z[y, x]
 
     @ti.kernel
     def gather(self, src: ti.i32):

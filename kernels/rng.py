@@ -31,13 +31,23 @@ def lowbias32(x: ti.u32) -> ti.u32:
 
 
 @ti.func
-def hash_key(seed, frame, stream, index) -> ti.u32:
-    """32-bit hash of the key (seed, frame, stream, index); any integer types."""
+def key_prefix(seed, frame, stream) -> ti.u32:
+    """The hash state after (seed, frame, stream): compute it once per launch, outside the particle loop."""
     h = lowbias32(ti.cast(seed, ti.u32) ^ ti.u32(GOLDEN))
     h = lowbias32(h ^ ti.cast(frame, ti.u32))
-    h = lowbias32(h ^ ti.cast(stream, ti.u32))
-    h = lowbias32(h ^ ti.cast(index, ti.u32))
-    return lowbias32(h + ti.u32(GOLDEN))
+    return lowbias32(h ^ ti.cast(stream, ti.u32))
+
+
+@ti.func
+def hash_index(prefix: ti.u32, index) -> ti.u32:
+    """Finish the hash of a key from its prefix: hash_key(s, f, st, i) = hash_index(key_prefix(s, f, st), i)."""
+    return lowbias32(lowbias32(prefix ^ ti.cast(index, ti.u32)) + ti.u32(GOLDEN))
+
+
+@ti.func
+def hash_key(seed, frame, stream, index) -> ti.u32:
+    """32-bit hash of the key (seed, frame, stream, index); any integer types."""
+    return hash_index(key_prefix(seed, frame, stream), index)
 
 
 @ti.func
@@ -53,6 +63,12 @@ def uniform(seed, frame, stream, index) -> ti.f32:
 
 
 @ti.func
+def uniform_at(prefix: ti.u32, index) -> ti.f32:
+    """U(0, 1) for the key whose prefix is given (see key_prefix)."""
+    return unit_from_bits(hash_index(prefix, index))
+
+
+@ti.func
 def normal(seed, frame, stream, index) -> ti.f32:
     """N(0, 1) variate for the key (Box–Muller on two hashes of the key, f32)."""
     h = hash_key(seed, frame, stream, index)
@@ -64,11 +80,28 @@ def normal(seed, frame, stream, index) -> ti.f32:
 @ti.func
 def uniform_f64(seed, frame, stream, index) -> ti.f64:
     """U(0, 1) in f64 with 53 random bits (two hashes of the key), for long cumulative sums."""
-    h = hash_key(seed, frame, stream, index)
+    return uniform_f64_at(key_prefix(seed, frame, stream), index)
+
+
+@ti.func
+def uniform_f64_at(prefix: ti.u32, index) -> ti.f64:
+    """uniform_f64 for the key whose prefix is given."""
+    h = hash_index(prefix, index)
     h2 = lowbias32(h + ti.u32(GOLDEN))
     hi = ti.cast(h >> 5, ti.f64)  # 27 bits
     lo = ti.cast(h2 >> 6, ti.f64)  # 26 bits
     return (hi * ti.f64(67108864.0) + lo + ti.f64(0.5)) * ti.f64(INV_2_53)
+
+
+@ti.func
+def normal_pair(prefix: ti.u32, index) -> ti.types.vector(2, ti.f32):
+    """Two independent N(0, 1) variates for the key with this prefix (Box–Muller r·cos and r·sin)."""
+    h = hash_index(prefix, index)
+    u1 = unit_from_bits(h)
+    u2 = unit_from_bits(lowbias32(h + ti.u32(GOLDEN)))
+    r = ti.sqrt(ti.f32(-2.0) * ti.log(u1))
+    a = ti.f32(TWO_PI) * u2
+    return ti.Vector([r * ti.cos(a), r * ti.sin(a)], dt=ti.f32)
 
 
 @ti.kernel

@@ -90,7 +90,10 @@ def cmd_bench(args) -> int:
     unknown = [e for e in engines if e not in ("taichi", "numpy")]
     if unknown or not engines:
         raise TBDError(f"--engines takes a comma list of taichi,numpy; got {args.engines!r}")
-    result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch)
+    if args.particles < 0 or args.groups < 1 or (args.particles and args.particles < args.groups):
+        raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
+    result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
+                       particles=args.particles, groups=args.groups)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -153,6 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--snr", type=float, default=1.4, help="SNR preset: the lowest SNR to detect (default 1.4)")
     be.add_argument("--frames", type=int, default=20, help="timed frames per engine (default 20)")
     be.add_argument("--engines", default="taichi,numpy", help="comma list of engines (default taichi,numpy)")
+    be.add_argument("--particles", type=int, default=0,
+                    help="also time one particle-filter step of a pool this large (stage 'particles'; default 0: off)")
+    be.add_argument("--groups", type=int, default=1, help="filters the pool is split into (default 1)")
     be.add_argument("--json", action="store_true", help="print one JSON object as the last line")
     _common(be)
     be.set_defaults(func=cmd_bench)

@@ -101,7 +101,7 @@ class ParticlePool:
         self._put("gt0", gt0)
         self._put("gt1", gt1)
         self.counts = np.zeros(self.n_groups, np.int32)
-        self._put("n", self.counts)
+        self.k.set_counts(0, self.counts)
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
@@ -177,7 +177,7 @@ class ParticlePool:
         counts = np.asarray(counts, dtype=np.int64).reshape(-1)
         self._check_counts(counts, "live count")
         self.counts = counts.astype(np.int32)
-        self._put("n", self.counts)
+        self.k.set_counts(0, self.counts)
 
     def _check_counts(self, counts: np.ndarray, what: str) -> None:
         if counts.shape != (self.n_groups,):
@@ -219,7 +219,7 @@ class ParticlePool:
         z = np.asarray(z, dtype=np.float32)
         if z.shape != self.frame_shape:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
-        self._put("z", z)
+        self.k.load_frame(np.ascontiguousarray(z))
 
     def predict(self, frame: int) -> None:
         """Steps 1–2: existence (Eqs. 7–8), newborn draws, NCV propagation (Eqs. 9–10)."""
@@ -242,15 +242,16 @@ class ParticlePool:
         n_out = self.counts.copy() if n_out is None else np.asarray(n_out, dtype=np.int64).reshape(-1)
         self._check_counts(n_out, "resampled count")
         n_out = np.where(self.counts > 0, n_out, 0).astype(np.int32)
-        self._put("n_out", n_out)
+        self.k.set_counts(1, n_out)
         if systematic:
             from .numpy_kernels import rng
 
             self._put("u0", rng.uniform_f64(self.seed, frame, 99, np.arange(self.n_groups)))
         self.k.draw_parents(self.seed, frame, int(systematic))
         self.k.gather(self.buf)
+        self.k.commit_counts()
         self.buf = 1 - self.buf
-        self.set_counts(n_out)
+        self.counts = n_out
 
     def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False) -> None:
         """One full filter step on normalised frame ``z`` for every group."""

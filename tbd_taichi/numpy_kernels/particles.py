@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.particles import (N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL, S_BIRTH_SPEED,
-                                  S_BIRTH_X, S_BIRTH_Y, S_EXIST, S_NOISE_I, S_NOISE_VX, S_NOISE_VY, S_NOISE_X,
-                                  S_NOISE_Y, S_RESAMPLE, TILE, TWO_PI)
+                                  S_BIRTH_X, S_BIRTH_Y, S_EXIST, S_NOISE_I, S_NOISE_V, S_NOISE_XY, S_RESAMPLE, TILE,
+                                  TWO_PI)
 from . import rng
 
 F32 = np.float32
@@ -101,8 +101,9 @@ class NumpyParticleKernels:
         c11, c21, c22 = np.sqrt(q1 / F32(3.0)), np.sqrt(q1) * F32(0.8660254037844386), np.sqrt(q1) * F32(0.5)
         i = self.live_slots()
         i = i[(self.e[b, i] == 1) & (self.born[i] == 0)]
-        n1, n2, n3, n4, n5 = (rng.normal(seed, frame, s, i) for s in
-                              (S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I))
+        n1, n3 = rng.normal_pair(seed, frame, S_NOISE_XY, i)
+        n2, n4 = rng.normal_pair(seed, frame, S_NOISE_V, i)
+        n5 = rng.normal_pair(seed, frame, S_NOISE_I, i)[0]
         x = self.x[b, i] + self.vx[b, i] + c11 * n1
         y = self.y[b, i] + self.vy[b, i] + c11 * n3
         self.x[b, i], self.y[b, i] = x, y
@@ -211,6 +212,18 @@ class NumpyParticleKernels:
             else:
                 u = rng.uniform_f64(seed, frame, S_RESAMPLE, slots)
             self.parent[slots] = self.find_parent(g, u * self.gtotal[g])
+
+    def set_counts(self, which: int, counts: np.ndarray) -> None:
+        if which == 0:
+            self.n[:] = counts
+        else:
+            self.n_out[:] = np.where(self.n > 0, counts, 0)
+
+    def commit_counts(self) -> None:
+        self.n[:] = self.n_out
+
+    def load_frame(self, z: np.ndarray) -> None:
+        self.z[...] = z
 
     def gather(self, src: int) -> None:
         dst = 1 - src

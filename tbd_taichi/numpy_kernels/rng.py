@@ -60,3 +60,15 @@ def uniform_f64(seed, frame, stream, index) -> np.ndarray:
     hi = (h >> _U32(5)).astype(np.float64)
     lo = (h2 >> _U32(6)).astype(np.float64)
     return (hi * 67108864.0 + lo + 0.5) * INV_2_53
+
+
+def normal_pair(seed, frame, stream, index) -> tuple[np.ndarray, np.ndarray]:
+    """Two float32 N(0, 1) arrays for the keys: r·cos and r·sin of one Box–Muller draw
+    (the kernel's ``normal_pair(key_prefix(seed, frame, stream), index)``)."""
+    h = hash_key(seed, frame, stream, index)
+    u1 = unit_from_bits(h)
+    with np.errstate(over="ignore"):
+        u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
+    r = np.sqrt(np.float32(-2.0) * np.log(u1))
+    a = np.float32(TWO_PI) * u2
+    return r * np.cos(a), r * np.sin(a)
