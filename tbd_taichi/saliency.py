@@ -109,6 +109,7 @@ class NumpySaliencyEngine:
     def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
         self.grid, self.d, self.r = grid, d, window
         self.ring = {name: np.zeros((3,) + tuple(shape), np.float32) for name in ("z", "se_max", "acc", "acc_max")}
+        self.proposal = np.zeros(shape, np.float32)  # the latest frame's OPsal_N, as the Taichi engine keeps it
 
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         """Store frame t and compute I_se_max(t) (Eqs. 20–21 and the first max filter)."""
@@ -131,8 +132,9 @@ class NumpySaliencyEngine:
         mask = nps.segment(acc2, threshold, self.ring["acc"][slot], self.ring["acc_max"][slot])
         logw = nps.lef_map(z, self.d, 1.0, a, i_min, i_max)
         out = nps.block_proposal(mask, logw, self.grid.block_id, self.grid.n_blocks)
+        self.proposal = out["proposal"]
         out.update(mask=mask, threshold=threshold, i_range=(i_min, i_max))
-        return out
+        return out if details else {}
 
 
 SERIAL_PIXELS = 1 << 18  # up to this many pixels, serial loops beat a parallel launch on the CPU
