@@ -19,20 +19,13 @@ import numpy as np
 
 from . import backend
 from .normalize import normalise_frame
+from .params import SGDSParams
 from .particles import ParticlePool
 from .pf import birth_intensity_range
 from .saliency import SaliencyExtractor
 from .simulate import simulate
 
 WARMUP = 3
-
-
-def block_size_for_snr(snr: float) -> int:
-    """L_ib from Table 2 by the lowest SNR to detect (point values inside the paper's ranges)."""
-    for lower, size in ((2.0, 256), (1.8, 256), (1.6, 200), (1.4, 150)):
-        if snr >= lower:
-            return size
-    return 100
 
 
 def _median_ms(samples: list[float]) -> float:
@@ -56,7 +49,7 @@ def benchmark_pool(shape, particles: int, groups: int, engine: str, snr: float, 
 
 def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1) -> dict:
     """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
-    ext = SaliencyExtractor(frames.shape[1:], snr=snr, block_size=block_size_for_snr(snr), engine=engine,
+    ext = SaliencyExtractor(frames.shape[1:], snr=snr, block_size=SGDSParams.for_snr(snr).L_ib, engine=engine,
                              details=False)
     pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
     stages: dict[str, list[float]] = {"normalise": [], "saliency": []}

@@ -17,6 +17,7 @@ import numpy as np
 
 from .errors import InputError, ParameterError
 from .normalize import normalise_frame
+from .params import snr_band
 from .particles import ParticlePool
 from .simulate import intensity_for_snr
 from .tables import TRACK_DTYPE, make_table
@@ -25,14 +26,6 @@ from .tables import TRACK_DTYPE, make_table
 TABLE3 = {50: (10_000, 14_000, 18_000, 24_000, 30_000), 200: (14_000, 20_000, 25_000, 30_000, 60_000)}
 # Table 5 (320×256 semi-physical), SNR 2, 1.6, 1.2
 TABLE5 = (40_000, 82_000, 123_000)
-
-
-def snr_band(snr: float) -> int:
-    """Index of the Table 2/3 SNR band: 0 for [2, ∞) … 4 for (0, 1.4)."""
-    for k, lower in enumerate((2.0, 1.8, 1.6, 1.4)):
-        if snr >= lower:
-            return k
-    return 4
 
 
 def table3_particles(shape, snr: float) -> int:
