@@ -23,6 +23,8 @@ TWO_PI = 2.0 * math.pi
 
 # random streams: one per use, so no two draws share a key
 S_EXIST, S_BIRTH_X, S_BIRTH_Y, S_BIRTH_SPEED, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL = range(1, 8)
+S_BIRTH_MU, S_COPY = 20, 21
+COPY_TRIES = 16  # draws of a random slot to find an E = 1 particle to copy
 S_NOISE_XY, S_NOISE_V, S_NOISE_I, S_RESAMPLE = range(8, 12)
 
 # per-group sums of ``moments`` (f64)
@@ -46,7 +48,7 @@ class ParticleKernels:
         self.logw, self.born, self.parent, self.cum = f32(c), i32(c), i32(c), f64(c)
         self.slot_group = i32(c)
         self.off, self.cap, self.n, self.n_out, self.kind = i32(g), i32(g), i32(g), i32(g), i32(g)
-        self.pb, self.pd = f32(g), f32(g)
+        self.pb, self.pd, self.mu = f32(g), f32(g), f32(g)
         self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
         self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
         self.gmax, self.gmax_e, self.gtotal, self.u0 = f32(g), f32(g), f64(g), f64(g)
@@ -58,6 +60,7 @@ class ParticleKernels:
         self.map_pixel, self.map_cdf = i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(*frame_shape)
+        self.label = i32(*frame_shape)
 
     # ------------------------------------------------------------ helpers
 
@@ -105,22 +108,60 @@ class ParticleKernels:
         return self.map_pixel[lo]
 
     @ti.kernel
+    def mark_initial(self, old_counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Slots added since ``old_counts`` (the top-up of Eq. 35) become initial particles (born = 2)."""
+        ti.loop_config(serialize=self.serial)
+        for i in range(self.capacity):
+            if self.live(i):
+                g = self.slot_group[i]
+                if i - self.off[g] >= old_counts[g]:
+                    self.born[i] = 2
+
+    @ti.func
+    def copy_particle(self, b: ti.i32, i: ti.i32, j: ti.i32):
+        self.x[b, i] = self.x[b, j]
+        self.vx[b, i] = self.vx[b, j]
+        self.y[b, i] = self.y[b, j]
+        self.vy[b, i] = self.vy[b, j]
+        self.inten[b, i] = self.inten[b, j]
+        self.tp[b, i] = self.tp[b, j]
+        self.seq[b, i] = self.seq[b, j]
+
+    @ti.kernel
     def draw_newborn(self, seed: ti.u32, frame: ti.i32, b: ti.i32, width: ti.i32):
-        """Step 2 for newborn particles (E 0 → 1): state from the group's birth proposal, Tp = 1 (Eq. 34).
+        """Step 2 for newborn (born = 1, E 0 → 1) and initial (born = 2) particles (Eq. 34).
 
         kind 0: position uniform over [bx0, bx1) × [by0, by1); kind 1: a pixel drawn from the
-        group's proposal map, plus U(−½, ½) in x and y.  Speed U[0, vmax] in a uniform direction,
-        intensity U[imin, imax]; kind 2 (tracks) leaves newborns to the scheduler's copies.
+        group's proposal map plus U(−½, ½) in x and y, and Seq from the label image (Eq. 36); with
+        an empty map the particle cannot be placed and gets E = 0.  Speed U[0, vmax] in a uniform
+        direction, intensity U[imin, imax], Tp = 1; initial particles draw E = [U < μ].
+        kind 2 (tracking PFs): a copy of a random E = 1 particle of the same group (E = 0 if
+        none is found), propagated afterwards like an existing particle.
         """
         kx, ky = key_prefix(seed, frame, S_BIRTH_X), key_prefix(seed, frame, S_BIRTH_Y)
         ks, ka = key_prefix(seed, frame, S_BIRTH_SPEED), key_prefix(seed, frame, S_BIRTH_ANGLE)
         ki, kp = key_prefix(seed, frame, S_BIRTH_I), key_prefix(seed, frame, S_BIRTH_PIXEL)
+        km, kc = key_prefix(seed, frame, S_BIRTH_MU), key_prefix(seed, frame, S_COPY)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
-            if self.live(i) and self.born[i] == 1:
+            if self.live(i) and self.born[i] >= 1:
                 g = self.slot_group[i]
                 k = self.kind[g]
-                if k <= 1:
+                if k == 2:
+                    found = -1
+                    for t in range(COPY_TRIES):
+                        u = uniform_at(kc, i * COPY_TRIES + t)
+                        j = self.off[g] + ti.min(ti.cast(u * ti.cast(self.n[g], ti.f32), ti.i32), self.n[g] - 1)
+                        if found < 0 and self.e[b, j] == 1 and self.born[j] == 0:
+                            found = j
+                    if found >= 0:
+                        self.copy_particle(b, i, found)
+                        self.e[b, i] = 1
+                    else:
+                        self.e[b, i] = 0
+                elif k == 1 and self.map_n[g] == 0:
+                    self.e[b, i] = 0
+                else:
                     ux = uniform_at(kx, i)
                     uy = uniform_at(ky, i)
                     if k == 0:
@@ -130,17 +171,20 @@ class ParticleKernels:
                         p = self.map_pixel_draw(g, uniform_f64_at(kp, i) * self.map_total[g])
                         self.x[b, i] = ti.cast(p % width, ti.f32) + (ux - ti.f32(0.5))
                         self.y[b, i] = ti.cast(p // width, ti.f32) + (uy - ti.f32(0.5))
+                        self.seq[b, i] = self.label[p // width, p % width]
                     speed = self.vmax[g] * uniform_at(ks, i)
                     angle = ti.f32(TWO_PI) * uniform_at(ka, i)
                     self.vx[b, i] = speed * ti.cos(angle)
                     self.vy[b, i] = speed * ti.sin(angle)
                     self.inten[b, i] = self.imin[g] + (self.imax[g] - self.imin[g]) * uniform_at(ki, i)
                     self.tp[b, i] = 1
+                    if self.born[i] == 2:
+                        self.e[b, i] = ti.cast(uniform_at(km, i) < self.mu[g], ti.i32)
 
     @ti.kernel
     def propagate(self, seed: ti.u32, frame: ti.i32, b: ti.i32, q1: ti.f32, q2: ti.f32, i_floor: ti.f32,
                   width: ti.i32, height: ti.i32):
-        """Step 2 for existing particles (E 1 → 1), Eqs. 9–10: nearly constant velocity plus
+        """Step 2 for existing particles (E 1 → 1, and copied newborns of kind 2), Eqs. 9–10: NCV plus
         Cholesky-factored noise of Q (Eq. 46, T = 1), I ← max(I + √q2·n, i_floor), Tp ← Tp + 1.
         A particle whose position leaves the image (x ∉ [−½, W−½)) gets E = 0."""
         c11 = ti.sqrt(q1 / ti.f32(3.0))
@@ -151,7 +195,7 @@ class ParticleKernels:
             key_prefix(seed, frame, S_NOISE_I)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
-            if self.live(i) and self.e[b, i] == 1 and self.born[i] == 0:
+            if self.live(i) and self.e[b, i] == 1 and (self.born[i] == 0 or self.kind[self.slot_group[i]] == 2):
                 p13 = normal_pair(kxy, i)
                 p24 = normal_pair(kv, i)
                 n1, n3, n2, n4 = p13[0], p13[1], p24[0], p24[1]
@@ -312,6 +356,33 @@ class ParticleKernels:
         ti.loop_config(serialize=True)
         for g in range(self.n.shape[0]):
             self.n[g] = self.n_out[g]
+
+    @ti.kernel
+    def write_slots(self, b: ti.i32, start: ti.i32, x: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    vx: ti.types.ndarray(dtype=ti.f32, ndim=1), y: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    vy: ti.types.ndarray(dtype=ti.f32, ndim=1), inten: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    e: ti.types.ndarray(dtype=ti.i32, ndim=1), tp: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Host particle states into slots start … start + n − 1 of buffer b."""
+        ti.loop_config(serialize=self.serial)
+        for k in range(x.shape[0]):
+            i = start + k
+            self.x[b, i] = x[k]
+            self.vx[b, i] = vx[k]
+            self.y[b, i] = y[k]
+            self.vy[b, i] = vy[k]
+            self.inten[b, i] = inten[k]
+            self.e[b, i] = e[k]
+            self.tp[b, i] = tp[k]
+            self.seq[b, i] = seq[k]
+
+    @ti.kernel
+    def load_labels(self, labels: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """The PP label image that newborns drawn from a proposal map take their Seq from (Eq. 36)."""
+        ti.loop_config(serialize=self.serial)
+        for y in range(labels.shape[0]):
+            for x in range(labels.shape[1]):
+                self.label[y, x] = labels[y, x]
 
     @ti.kernel
     def load_frame(self, z: ti.types.ndarray(dtype=ti.f32, ndim=2)):

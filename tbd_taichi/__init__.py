@@ -15,11 +15,15 @@ from . import io, metrics, normalize, tables
 from .backend import available_archs, init
 from .errors import BackendError, InputError, ParameterError, TBDError
 from .normalize import normalise_frame
+from .params import SGDSParams
+from .pf import OriginalPF
+from .sgds import SGDSPF, track
 from .simulate import Scenario, simulate
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "BackendError", "InputError", "ParameterError", "Scenario", "TBDError", "available_archs", "init",
+    "BackendError", "InputError", "OriginalPF", "ParameterError", "SGDSPF", "SGDSParams", "Scenario", "TBDError",
+    "available_archs", "init", "track",
     "io", "metrics", "normalise_frame", "normalize", "simulate", "tables", "__version__",
 ]

@@ -11,7 +11,6 @@ import numpy as np
 from . import backend, metrics, tables
 from .errors import TBDError
 
-MIN_TRACK_FRAMES = 5
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
              "(a GPU if there is one, else the CPU)")
 
@@ -64,22 +63,59 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def _progress(total: int | None, enabled: bool):
+    """A rich progress bar over frames (a no-op context when disabled)."""
+    import contextlib
+
+    if not enabled:
+        return contextlib.nullcontext(None)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), transient=True)
+
+
 def cmd_track(args) -> int:
     from . import io
     from .pf import OriginalPF
+    from .sgds import MIN_FRAMES, SGDSPF
 
     source = io.open_frames(args.input)
-    tracker = OriginalPF(source.shape, snr=args.snr, seed=args.seed, engine=args.engine, n_particles=args.particles,
-                         threshold=args.threshold)
-    for frame in io.iter_frames(source, min_frames=MIN_TRACK_FRAMES):
-        tracker.update(frame)
+    if args.method == "sgds":
+        tracker = SGDSPF(source.shape, snr=args.snr, seed=args.seed, engine=args.engine)
+    else:
+        tracker = OriginalPF(source.shape, snr=args.snr, seed=args.seed, engine=args.engine,
+                             n_particles=args.particles, threshold=args.threshold)
+    max_projection = None
+    with _progress(source.n_frames, args.progress) as bar:
+        task = bar.add_task("frames", total=source.n_frames) if bar else None
+        for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
+            tracker.update(frame)
+            max_projection = frame if max_projection is None else np.maximum(max_projection, frame)
+            if bar:
+                bar.advance(task)
     tracks = tracker.finish()
+    if args.method == "sgds" and args.paths == "online":
+        tracks = tracker.online()
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tables.write_csv(tracks, out)
     n_tracks = len(np.unique(tracks["track_id"]))
-    print(f"{args.method}: {tracker.frame} frames, {tracker.n_particles} particles, {n_tracks} track(s), "
-          f"{len(tracks)} rows -> {out}")
+    print(f"{args.method}: {len(tracks)} rows of {n_tracks} track(s) -> {out}")
+    truth = tables.read_truth(args.truth) if args.truth else None
+    if truth is not None:
+        scores = metrics.evaluate(tracks, truth)
+        scores.update(t0=metrics.T0, ospa_c=metrics.OSPA_C, ospa_p=metrics.OSPA_P)
+        print(_format_scores(scores))
+    if args.plot:
+        from .plots import plot_tracks
+
+        plot_tracks(max_projection, tracks, args.plot, truth, title=f"{args.method} tracks on {Path(args.input).name}")
+        print(f"plot -> {args.plot}")
+    if args.video:
+        from .plots import write_overlay_video
+
+        n = write_overlay_video(io.iter_frames(source), tracks, args.video)
+        print(f"video ({n} frames) -> {args.video}")
     return 0
 
 
@@ -135,16 +171,24 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Run a track-before-detect filter over INPUT and write the tracks CSV "
                                     "(frame,track_id,x,y,vx,vy,intensity,confidence; x = column, y = row, 0-based).")
     tr.add_argument("input", metavar="INPUT", help="a .npy/.npz file, a video, or a folder of PNG/TIFF/BMP images")
-    tr.add_argument("--method", choices=("pf",), default="pf",
-                    help="pf: the original single-target PF-TBD (Ristic et al.; SGDS-PF's baseline)")
+    tr.add_argument("--method", choices=("sgds", "pf"), default="sgds",
+                    help="sgds: the saliency-guided double-stage PF (default); pf: the original single-target PF-TBD "
+                         "(Ristic et al.; SGDS-PF's baseline)")
     tr.add_argument("--snr", type=float, default=1.4, help="the lowest target SNR to detect (default 1.4)")
     tr.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same file (default 0)")
     tr.add_argument("--engine", choices=("taichi", "numpy"), default="taichi", help="kernel engine (default taichi)")
     tr.add_argument("--particles", type=int, default=None,
-                    help="particle count (default: the SGDS-PF paper's Table 3 for the image size and SNR)")
+                    help="pf only: particle count (default: the SGDS-PF paper's Table 3 for the image size and SNR)")
     tr.add_argument("--threshold", type=float, default=0.5,
-                    help="existence probability above which a target is declared (default 0.5)")
+                    help="pf only: existence probability above which a target is declared (default 0.5)")
     tr.add_argument("--out", required=True, help="output tracks CSV")
+    tr.add_argument("--paths", choices=("whole", "online"), default="whole",
+                    help="sgds: whole = each confirmed track's whole path, from before its confirmation (default); "
+                         "online = the rows as output online, from confirmation on")
+    tr.add_argument("--truth", default=None, help="truth CSV (frame,target_id,x,y,...): print DSR, EDT, false tracks, OSPA")
+    tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail (.mp4 or .avi)")
+    tr.add_argument("--plot", default=None, help="PNG of the tracks over the max-projection (with the truth if given)")
+    tr.add_argument("--progress", action="store_true", help="show a progress bar")
     _common(tr)
     tr.set_defaults(func=cmd_track)
 

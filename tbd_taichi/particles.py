@@ -32,7 +32,7 @@ from .errors import ParameterError
 
 ENGINES = ("taichi", "numpy")
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
-GROUP_PARAMS = ("pb", "pd", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
+GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 
 
@@ -124,20 +124,22 @@ class ParticlePool:
     # ------------------------------------------------------------ configuration
 
     def configure_groups(self, groups, kind: str = "uniform", pb: float = 0.05, pd: float = 0.05,
-                         region=None, vmax: float = 1.0, intensity=(1.0, 10.0)) -> None:
+                         region=None, vmax: float = 1.0, intensity=(1.0, 10.0), mu: float = 0.5) -> None:
         """Set the birth/death model and birth proposal of ``groups`` (indices).
 
-        ``region`` = (x0, x1, y0, y1) px for uniform births (default: the whole image,
-        [−½, W−½) × [−½, H−½)); ``vmax`` px/frame; ``intensity`` = (I_min, I_max).
+        ``kind``: "uniform" over ``region`` = (x0, x1, y0, y1) px (default: the whole image,
+        [−½, W−½) × [−½, H−½)), "map" (the group's proposal map) or "copy" (a random E = 1
+        particle of the group: tracking PFs).  ``vmax`` px/frame; ``intensity`` = (I_min, I_max);
+        ``mu`` the existence probability of initial particles added by :meth:`grow` (Eq. 34).
         """
         if kind not in BIRTH_KINDS:
             raise ParameterError(f"birth kind must be one of {', '.join(BIRTH_KINDS)}, got {kind!r}")
-        if not (0 <= pb <= 1 and 0 <= pd <= 1) or vmax < 0 or intensity[0] > intensity[1]:
-            raise ParameterError("need 0 ≤ pb, pd ≤ 1, vmax ≥ 0 and I_min ≤ I_max")
+        if not (0 <= pb <= 1 and 0 <= pd <= 1 and 0 <= mu <= 1) or vmax < 0 or intensity[0] > intensity[1]:
+            raise ParameterError("need 0 ≤ pb, pd, mu ≤ 1, vmax ≥ 0 and I_min ≤ I_max")
         h, w = self.frame_shape
         x0, x1, y0, y1 = region if region is not None else (-0.5, w - 0.5, -0.5, h - 0.5)
         groups = np.atleast_1d(np.asarray(groups, dtype=np.int64))
-        values = dict(pb=pb, pd=pd, bx0=x0, bx1=x1, by0=y0, by1=y1, vmax=vmax, imin=intensity[0], imax=intensity[1])
+        values = dict(pb=pb, pd=pd, mu=mu, bx0=x0, bx1=x1, by0=y0, by1=y1, vmax=vmax, imin=intensity[0], imax=intensity[1])
         for name, value in values.items():
             self.params[name][groups] = value
             self._put(name, self.params[name])
@@ -179,6 +181,22 @@ class ParticlePool:
         self.counts = counts.astype(np.int32)
         self.k.set_counts(0, self.counts)
 
+    def grow(self, counts) -> None:
+        """Raise live counts to ``counts``; the added slots become initial particles (Eqs. 34–35),
+        drawn by the next :meth:`predict` from the group's proposal with E = [U < μ]."""
+        counts = np.maximum(np.asarray(counts, dtype=np.int64).reshape(-1), self.counts)
+        old = self.counts.copy()
+        self.set_counts(counts)
+        self.k.mark_initial(old)
+
+    def load_labels(self, labels: np.ndarray) -> None:
+        """PP label image (H, W) int32 that map-drawn particles take their Seq from (Eq. 36)."""
+        self.k.load_labels(np.ascontiguousarray(labels, dtype=np.int32))
+
+    def max_log_weights(self) -> np.ndarray:
+        """Per group, the largest log-weight of an E = 1 particle in the last :meth:`weigh` (−3e38: none)."""
+        return self._get("gmax_e").astype(np.float64)
+
     def _check_counts(self, counts: np.ndarray, what: str) -> None:
         if counts.shape != (self.n_groups,):
             raise ParameterError(f"need one {what} per group ({self.n_groups}), got {counts.shape}")
@@ -203,13 +221,14 @@ class ParticlePool:
         for g, st in group_states.items():
             counts[g] = len(st["x"])
         self._check_counts(counts, "particle count")
-        arrays = {name: self._get(name) for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
         for g, st in group_states.items():
-            s = slice(int(self.off[g]), int(self.off[g]) + len(st["x"]))
-            for name, arr in arrays.items():
-                arr[self.buf, s] = st.get(name, 0)
-        for name, arr in arrays.items():
-            self._put(name, arr)
+            n = len(st["x"])
+            if n == 0:
+                continue
+            cols = [np.ascontiguousarray(np.broadcast_to(st.get(name, 0), n), dtype=dtype) for name, dtype in
+                    (("x", np.float32), ("vx", np.float32), ("y", np.float32), ("vy", np.float32),
+                     ("inten", np.float32), ("e", np.int32), ("tp", np.int32), ("seq", np.int32))]
+            self.k.write_slots(self.buf, int(self.off[g]), *cols)
         self.set_counts(counts)
 
     # ------------------------------------------------------------ one step
@@ -221,10 +240,15 @@ class ParticlePool:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
         self.k.load_frame(np.ascontiguousarray(z))
 
-    def predict(self, frame: int) -> None:
-        """Steps 1–2: existence (Eqs. 7–8), newborn draws, NCV propagation (Eqs. 9–10)."""
+    def predict(self, frame: int, top_up=None) -> None:
+        """Steps 1–2: existence (Eqs. 7–8), newborn and initial draws, NCV propagation (Eqs. 9–10).
+
+        ``top_up`` (optional counts per group) grows the groups after the existence step, so
+        the added initial particles are drawn in the same launch as the newborns (Eq. 35)."""
         k, h, w = self.k, self.frame_shape[0], self.frame_shape[1]
         k.predict_existence(self.seed, frame, self.buf)
+        if top_up is not None:
+            self.grow(top_up)
         k.draw_newborn(self.seed, frame, self.buf, w)
         k.propagate(self.seed, frame, self.buf, self.q1, self.q2, self.intensity_floor, w, h)
 
@@ -287,4 +311,4 @@ class ParticlePool:
             cov[:, 0, 1] = cov[:, 1, 0] = mean(M_XY, n) - mx * my
             return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), mean(M_EX, ne),
                                   mean(M_EVX, ne), mean(M_EY, ne), mean(M_EVY, ne), mean(M_EI, ne), mean(M_TP, n), cov,
-                                  self._get("gmax_e").astype(np.float64))
+                                  self.max_log_weights())

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.particles import (N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL, S_BIRTH_SPEED,
-                                  S_BIRTH_X, S_BIRTH_Y, S_EXIST, S_NOISE_I, S_NOISE_V, S_NOISE_XY, S_RESAMPLE, TILE,
-                                  TWO_PI)
+from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
+                                  S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, S_NOISE_I,
+                                  S_NOISE_V, S_NOISE_XY, S_RESAMPLE, TILE, TWO_PI)
 from . import rng
 
 F32 = np.float32
@@ -31,7 +31,7 @@ class NumpyParticleKernels:
         self.slot_group = np.full(c, -1, np.int32)
         for name in ("off", "cap", "n", "n_out", "kind", "gt0", "gt1", "map_off", "map_n"):
             setattr(self, name, np.zeros(g, np.int32))
-        for name in ("pb", "pd", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax", "gmax", "gmax_e"):
+        for name in ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax", "gmax", "gmax_e"):
             setattr(self, name, np.zeros(g, F32))
         self.gtotal, self.u0, self.map_total = np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
@@ -40,6 +40,7 @@ class NumpyParticleKernels:
         self.tile_moments, self.moments = np.zeros((n_tiles, N_MOMENTS)), np.zeros((g, N_MOMENTS))
         self.map_pixel, self.map_cdf = np.zeros(map_capacity, np.int32), np.zeros(map_capacity)
         self.z = np.zeros(frame_shape, F32)
+        self.label = np.zeros(frame_shape, np.int32)
 
     # ------------------------------------------------------------ helpers
 
@@ -74,11 +75,21 @@ class NumpyParticleKernels:
             out[sel] = self.map_pixel[lo + np.minimum(k, n - 1)]
         return out
 
+    def mark_initial(self, old_counts: np.ndarray) -> None:
+        i = self.live_slots()
+        g = self.slot_group[i]
+        new = i - self.off[g] >= old_counts[g]
+        self.born[i[new]] = 2
+
     def draw_newborn(self, seed: int, frame: int, b: int, width: int) -> None:
         i = self.live_slots()
-        i = i[self.born[i] == 1]
+        i = i[self.born[i] >= 1]
         g = self.slot_group[i]
-        keep = self.kind[g] <= 1
+        kind = self.kind[g]
+        self._copy_newborn(seed, frame, b, i[kind == 2], g[kind == 2])
+        unplaceable = (kind == 1) & (self.map_n[g] == 0)
+        self.e[b, i[unplaceable]] = 0
+        keep = (kind <= 1) & ~unplaceable
         i, g = i[keep], g[keep]
         ux, uy = rng.uniform(seed, frame, S_BIRTH_X, i), rng.uniform(seed, frame, S_BIRTH_Y, i)
         x = self.bx0[g] + (self.bx1[g] - self.bx0[g]) * ux
@@ -89,18 +100,35 @@ class NumpyParticleKernels:
             p = self.map_pixel_draw(g[from_map], v)
             x[from_map] = (p % width).astype(F32) + (ux[from_map] - F32(0.5))
             y[from_map] = (p // width).astype(F32) + (uy[from_map] - F32(0.5))
+            self.seq[b, i[from_map]] = self.label[p // width, p % width]
         speed = self.vmax[g] * rng.uniform(seed, frame, S_BIRTH_SPEED, i)
         angle = F32(TWO_PI) * rng.uniform(seed, frame, S_BIRTH_ANGLE, i)
         self.x[b, i], self.y[b, i] = x, y
         self.vx[b, i], self.vy[b, i] = speed * np.cos(angle), speed * np.sin(angle)
         self.inten[b, i] = self.imin[g] + (self.imax[g] - self.imin[g]) * rng.uniform(seed, frame, S_BIRTH_I, i)
         self.tp[b, i] = 1
+        initial = self.born[i] == 2
+        self.e[b, i[initial]] = (rng.uniform(seed, frame, S_BIRTH_MU, i[initial]) < self.mu[g[initial]]).astype(np.int32)
+
+    def _copy_newborn(self, seed: int, frame: int, b: int, i: np.ndarray, g: np.ndarray) -> None:
+        """Kind 2: copy a random E = 1, not-newborn particle of the same group (first hit of COPY_TRIES draws)."""
+        found = np.full(len(i), -1, np.int64)
+        for t in range(COPY_TRIES):
+            u = rng.uniform(seed, frame, S_COPY, i.astype(np.int64) * COPY_TRIES + t)
+            j = self.off[g] + np.minimum((u * self.n[g].astype(F32)).astype(np.int64), self.n[g] - 1)
+            ok = (found < 0) & (self.e[b, j] == 1) & (self.born[j] == 0)
+            found[ok] = j[ok]
+        hit = found >= 0
+        for name in ("x", "vx", "y", "vy", "inten", "tp", "seq"):
+            arr = getattr(self, name)
+            arr[b, i[hit]] = arr[b, found[hit]]
+        self.e[b, i] = hit.astype(np.int32)
 
     def propagate(self, seed, frame, b, q1, q2, i_floor, width, height) -> None:
         q1, q2 = F32(q1), F32(q2)
         c11, c21, c22 = np.sqrt(q1 / F32(3.0)), np.sqrt(q1) * F32(0.8660254037844386), np.sqrt(q1) * F32(0.5)
         i = self.live_slots()
-        i = i[(self.e[b, i] == 1) & (self.born[i] == 0)]
+        i = i[(self.e[b, i] == 1) & ((self.born[i] == 0) | (self.kind[self.slot_group[i]] == 2))]
         n1, n3 = rng.normal_pair(seed, frame, S_NOISE_XY, i)
         n2, n4 = rng.normal_pair(seed, frame, S_NOISE_V, i)
         n5 = rng.normal_pair(seed, frame, S_NOISE_I, i)[0]
@@ -224,6 +252,14 @@ class NumpyParticleKernels:
 
     def load_frame(self, z: np.ndarray) -> None:
         self.z[...] = z
+
+    def write_slots(self, b, start, x, vx, y, vy, inten, e, tp, seq) -> None:
+        s = slice(start, start + len(x))
+        for name, value in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
+            getattr(self, name)[b, s] = value
+
+    def load_labels(self, labels: np.ndarray) -> None:
+        self.label[...] = labels
 
     def gather(self, src: int) -> None:
         dst = 1 - src

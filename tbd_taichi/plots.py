@@ -1,0 +1,86 @@
+"""Pictures of tracks: a PNG over the max-projection, and an overlay video.
+
+Coordinates as everywhere: x = column, y = row, 0-based, pixel centres at integers.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+TRAIL = 30  # frames of trail drawn behind each track in the video
+BOX = 6  # half-size of the box around a track, px
+
+
+def track_colour(track_id: int) -> tuple[int, int, int]:
+    """A stable, distinct BGR colour per track id."""
+    hue = (int(track_id) * 47) % 180
+    bgr = cv2.cvtColor(np.uint8([[[hue, 220, 255]]]), cv2.COLOR_HSV2BGR)[0, 0]
+    return int(bgr[0]), int(bgr[1]), int(bgr[2])
+
+
+def to_display(frame: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """A float frame as 8-bit BGR, stretched from [lo, hi]."""
+    grey = np.clip((frame - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
+    return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+
+
+def plot_tracks(max_projection: np.ndarray, tracks: np.ndarray, path, truth: np.ndarray | None = None,
+                title: str = "") -> None:
+    """PNG: tracks (one colour each, id at the start) over the sequence's max-projection, truth in green."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 7 * max_projection.shape[0] / max(max_projection.shape[1], 1) + 0.5))
+    ax.imshow(max_projection, cmap="gray", interpolation="nearest")
+    if truth is not None and len(truth):
+        for tid in np.unique(truth["target_id"]):
+            t = truth[truth["target_id"] == tid]
+            ax.plot(t["x"], t["y"], "-", color="lime", lw=2, alpha=0.6, label="truth" if tid == truth["target_id"][0] else None)
+    for tid in np.unique(tracks["track_id"]):
+        t = tracks[tracks["track_id"] == tid]
+        b, g, r = track_colour(tid)
+        ax.plot(t["x"], t["y"], ".-", color=(r / 255, g / 255, b / 255), ms=3, lw=1, label=f"track {tid}")
+        ax.annotate(str(tid), (t["x"][0], t["y"][0]), color="yellow", fontsize=9)
+    ax.set_title(title or "tracks over the max-projection (x = column, y = row)")
+    if len(tracks) or truth is not None:
+        ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> int:
+    """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail; returns frames written."""
+    path = Path(path)
+    writer = None
+    by_frame: dict[int, np.ndarray] = {}
+    for f in np.unique(tracks["frame"]):
+        by_frame[int(f)] = tracks[tracks["frame"] == f]
+    n = 0
+    for f, frame in enumerate(frames):
+        lo, hi = np.percentile(frame, (1, 99.9))
+        img = to_display(frame, lo, hi)
+        if writer is None:
+            fourcc = cv2.VideoWriter_fourcc(*("mp4v" if path.suffix.lower() == ".mp4" else "MJPG"))
+            writer = cv2.VideoWriter(str(path), fourcc, fps, (img.shape[1], img.shape[0]))
+            if not writer.isOpened():
+                raise InputError(f"{path}: OpenCV cannot write a video of this type; use .mp4 or .avi")
+        for row in by_frame.get(f, ()):
+            tid, colour = int(row["track_id"]), track_colour(row["track_id"])
+            trail = tracks[(tracks["track_id"] == tid) & (tracks["frame"] <= f) & (tracks["frame"] > f - TRAIL)]
+            pts = np.stack([trail["x"], trail["y"]], axis=1).round().astype(np.int32)
+            cv2.polylines(img, [pts], False, colour, 1)
+            x, y = int(round(row["x"])), int(round(row["y"]))
+            cv2.rectangle(img, (x - BOX, y - BOX), (x + BOX, y + BOX), colour, 1)
+            cv2.putText(img, str(tid), (x + BOX + 1, y - BOX), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
+        writer.write(img)
+        n += 1
+    if writer is not None:
+        writer.release()
+    return n

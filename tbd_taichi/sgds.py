@@ -1,0 +1,382 @@
+"""SGDS-PF: the saliency-guided double-stage particle filter (Jia et al., Sensors 2022, §2.2–2.3).
+
+Per processed frame f (two frames behind the input, because of the saliency accumulation):
+
+1. **Saliency** (Eqs. 20–33): the per-block proposal map OPsal_N of frame f.
+2. **Searching mode** (Algorithm 1): one searching PF per image block, all in one particle
+   pool.  Newborn and initial particles are drawn from the block's proposal map (Eqs. 34–35),
+   labelled with their particle population (PP) by Eq. 36 (8-connected components of the
+   proposal support, ``cv2.connectedComponents``); existence, propagation, weights,
+   normalisation and resampling as in §2.1; the weakest PPs are eliminated (Eq. 37, P_e of
+   the block's particles per frame); PP states follow Eq. 38; a PP with PTp > T_PTp and
+   PE > T_PE is a potential target and moves, with its particles, to the tracking mode.
+3. **Tracking mode** (Algorithm 2): one tracking PF of N_tpf particles per potential target, all
+   in a second pool; newborns copy a random E = 1 particle of the same track.  Each frame the
+   track's estimate (Eq. 19) extends its path (Eq. 39) and its confidence C is updated by
+   ICEF (Eq. 40) and SCEF (Eqs. 41–42) (Eq. 43).  C < T_ft ends the track; N_rt > T_rt
+   (frames with C = 1) confirms it.
+
+Choices where the paper is open (see the README for the reasons): the intensity range of
+newborns is Eq. 26's [snr − 2, snr + 3] in σ units of the PSF peak, converted to total
+intensity (×2πΣ²) like the original PF; PE = ΣE/N_pp (the fraction of the PP's particles
+with E = 1); SCEF uses dev_d = √((var_x + var_y)/2 + |cov_xy|) and SCEF = T_devr/max(dev)
+when spread (the printed √cov can be imaginary); a track also ends when its estimate
+leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
+active track is masked and a potential target within 2 px of a track is dropped, so one
+target gives one track; of two tracks closer than 2 px the younger one is removed.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from . import backend
+from .errors import InputError, ParameterError
+from .normalize import normalise_frame
+from .params import SGDSParams
+from .particles import ParticlePool
+from .pf import birth_intensity_range
+from .saliency import SaliencyExtractor
+from .tables import TRACK_DTYPE, make_table
+
+MIN_FRAMES = 5
+DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
+LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
+
+
+@dataclass
+class Track:
+    """One tracking PF's bookkeeping: confidence, confirmation counter and path (Eq. 39)."""
+
+    track_id: int
+    group: int
+    confidence: float = 1.0
+    n_rt: int = 0
+    confirmed: bool = False
+    frames_without_e: int = 0
+    path: list = field(default_factory=list)  # (frame, x, y, vx, vy, intensity, confidence)
+
+    def last_xy(self) -> tuple[float, float]:
+        return self.path[-1][1], self.path[-1][2]
+
+
+def icef(log_mtw: float, log_msw: float) -> float:
+    """Eq. 40 on r = MTW/MSW (unnormalised E = 1 maxima, from log-weights)."""
+    if not np.isfinite(log_mtw) or log_mtw <= -1e37:
+        return 0.9
+    if not np.isfinite(log_msw) or log_msw <= -1e37:
+        return 1.0
+    r = math.exp(min(log_mtw - log_msw, 50.0))
+    return r if r >= 1 else (1.0 if r >= 0.1 else 0.9)
+
+
+def scef(cov: np.ndarray, t_devr: float) -> float:
+    """Eqs. 41–42, sound reading: 1.1 if the spread along x, y and the diagonals is ≤ T_devr,
+    else T_devr / (largest spread) < 1."""
+    var_x, var_y, cov_xy = max(cov[0, 0], 0.0), max(cov[1, 1], 0.0), cov[0, 1]
+    spread = max(math.sqrt(var_x), math.sqrt(var_y), math.sqrt((var_x + var_y) / 2 + abs(cov_xy)))
+    return 1.1 if spread <= t_devr else t_devr / spread
+
+
+def update_confidence(c: float, icef_value: float, scef_value: float) -> float:
+    """Eq. 43: C ← 1 if C·ICEF·SCEF ≥ 1, else C·ICEF·SCEF."""
+    v = c * icef_value * scef_value
+    return 1.0 if v >= 1.0 else v
+
+
+def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
+    """Indices that bring a PP of n particles to ``size`` (Algorithm 2's "random eliminating or
+    copying"): a random subset without replacement if n ≥ size, else all plus random copies.
+    ``u`` holds at least max(n, size) uniforms."""
+    if n >= size:
+        return np.sort(np.argsort(u[:n], kind="stable")[:size])
+    return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
+
+
+class SGDSPF:
+    """Streaming SGDS-PF tracker.
+
+    ``tracker = SGDSPF((H, W), snr=1.4, seed=0, engine="taichi", arch=None, **params)``;
+    ``params`` override the Table 2 preset of :class:`~tbd_taichi.params.SGDSParams`.
+    ``update(frame)`` takes one raw frame and returns the confirmed tracks' rows for the frame
+    it has just finished, which is two frames behind (saliency needs frame f + 2).
+    ``finish()`` processes the last two frames and returns every confirmed track with its
+    whole path, which may begin before the track was confirmed (its history in the tracking PF).
+    """
+
+    def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
+                 max_tracks: int = 32, background: str = "median", **params):
+        if len(shape) != 2 or min(shape) < 8:
+            raise ParameterError(f"shape must be (H, W) with H, W ≥ 8, got {tuple(shape)}")
+        if max_tracks < 1:
+            raise ParameterError("max_tracks must be ≥ 1")
+        self.p = SGDSParams.for_snr(snr, **params)
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.background, self.seed = background, int(seed)
+        if engine == "taichi":
+            backend.ensure_init(arch)
+        p = self.p
+        self.saliency = SaliencyExtractor(self.shape, snr=p.snr, block_size=p.L_ib, psf_sigma=p.psf_sigma,
+                                          engine=engine, details=False)
+        self.grid = self.saliency.grid
+        common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
+        self.search = ParticlePool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
+                                   map_capacity=self.shape[0] * self.shape[1], **common)
+        self.tracks_pool = ParticlePool([p.N_tpf] * max_tracks, self.shape, seed=seed + 7919, **common)
+        intensity = (max(p.snr - 2.0, 0.1), p.snr + 3.0)  # Eq. 26 as printed (σ units); see the module notes
+        self.search.configure_groups(np.arange(self.grid.n_blocks), "map", pb=p.P_b, pd=p.P_d_search,
+                                     vmax=p.V_limit, intensity=intensity, mu=p.mu)
+        self.tracks_pool.configure_groups(np.arange(max_tracks), "copy", pb=p.P_b, pd=p.P_d_track,
+                                          vmax=p.V_limit, intensity=intensity)
+        self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
+        self.next_pp = 1
+        self.free_groups = list(range(max_tracks))[::-1]
+        self.active: list[Track] = []
+        self.finished: list[Track] = []
+        self.next_track_id = 1
+        self.frames_in = 0
+        self.online_rows: list[tuple] = []
+        self._z = {}
+
+    # ------------------------------------------------------------ input
+
+    def update(self, frame) -> list[tuple]:
+        """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
+        frame finished now (frame t − 2), or [] for the first two frames."""
+        frame = np.asarray(frame)
+        if frame.shape != self.shape:
+            raise InputError(f"frame {self.frames_in} has shape {frame.shape}; the tracker was built for {self.shape}")
+        if not np.isfinite(frame).all():
+            raise InputError(f"frame {self.frames_in} contains NaN or inf")
+        z = normalise_frame(frame, self.background).z
+        self._z[self.frames_in] = z
+        self.frames_in += 1
+        rows = []
+        for s in self.saliency.push(z):
+            rows += self._process(s.frame)
+        return rows
+
+    def finish(self) -> np.ndarray:
+        """Process the last two frames and return the tracks table of every confirmed track's whole path."""
+        if self.frames_in < MIN_FRAMES:
+            raise InputError(f"{self.frames_in} frame(s), but SGDS-PF needs at least {MIN_FRAMES}")
+        for s in self.saliency.flush():
+            self._process(s.frame)
+        return self.whole_paths()
+
+    def whole_paths(self) -> np.ndarray:
+        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.confirmed
+                for (f, x, y, vx, vy, i, c) in t.path]
+        return make_table(rows, TRACK_DTYPE)
+
+    def online(self) -> np.ndarray:
+        """Rows as they were output online (from confirmation on)."""
+        return make_table(self.online_rows, TRACK_DTYPE)
+
+    # ------------------------------------------------------------ one frame
+
+    def _proposal(self) -> np.ndarray:
+        prop = self.saliency.engine.proposal
+        return prop if isinstance(prop, np.ndarray) else prop.to_numpy()
+
+    def _process(self, f: int) -> list[tuple]:
+        z = self._z.pop(f)
+        for old in [k for k in self._z if k < f]:
+            del self._z[old]
+        log_msw = self._search_step(f, z, self._proposal())
+        rows = self._track_step(f, z, log_msw)
+        self.online_rows += rows
+        return rows
+
+    def _suppress_tracked(self, proposal: np.ndarray) -> np.ndarray:
+        """Zero the proposal within DUPLICATE_RADIUS of active tracks (one target, one track)."""
+        if not self.active:
+            return proposal
+        prop = proposal.copy()
+        r = int(math.ceil(DUPLICATE_RADIUS))
+        for t in self.active:
+            x, y = t.last_xy()
+            cx, cy = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+            prop[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
+        return prop
+
+    def _labels(self, support: np.ndarray) -> np.ndarray:
+        """Eq. 36: existing PP ids where P_pp ≠ 0, else new ids from 8-connected components."""
+        n, comp = cv2.connectedComponents(support.astype(np.uint8), connectivity=8)
+        labels = np.where(comp > 0, comp + (self.next_pp - 1), 0).astype(np.int32)
+        self.next_pp += n - 1
+        old = (self.pp_index != 0) & support
+        labels[old] = self.pp_index[old]
+        return labels
+
+    def _search_step(self, f: int, z: np.ndarray, proposal: np.ndarray) -> float:
+        p, pool, grid = self.p, self.search, self.grid
+        proposal = self._suppress_tracked(proposal)
+        support = proposal > 0
+        pix = np.flatnonzero(support)
+        blocks = grid.block_id.ravel()[pix]
+        maps = {b: (pix[blocks == b], proposal.ravel()[pix[blocks == b]].astype(np.float64))
+                for b in np.unique(blocks)}
+        pool.set_proposal_map(maps)
+        pool.load_labels(self._labels(support))
+        pool.load_frame(z)
+        has_map = np.zeros(grid.n_blocks, bool)
+        has_map[list(maps)] = True
+        pool.predict(f, top_up=np.where(has_map, p.N_sump, pool.counts))
+        pool.weigh()
+        log_msw = float(pool.max_log_weights().max())
+        pool.resample(f)
+        self._eliminate_and_hand_over(f)
+        return log_msw
+
+    def _eliminate_and_hand_over(self, f: int) -> None:
+        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp."""
+        p, pool = self.p, self.search
+        st = pool.state()
+        keep = np.ones(len(st["x"]), bool)
+        handed = []
+        rng = np.random.default_rng([self.seed, f])
+        for b in range(self.grid.n_blocks):
+            idx = np.flatnonzero(st["group"] == b)
+            if not len(idx):
+                continue
+            seq = st["seq"][idx]
+            pps, inverse, counts = np.unique(seq, return_inverse=True, return_counts=True)
+            order = np.argsort(counts, kind="stable")
+            to_remove = int(round(p.P_e * p.N_sump))
+            removed = 0
+            for k in order:  # Eq. 37: smallest PPs first, the last one partially
+                if removed >= to_remove:
+                    break
+                members = idx[inverse == k]
+                take = min(len(members), to_remove - removed)
+                keep[members[:take]] = False  # resampled order is random: the first ones are a random subset
+                removed += take
+            for k, pp in enumerate(pps):
+                members = idx[(inverse == k) & keep[idx]]
+                if not len(members):
+                    continue
+                e = st["e"][members] == 1
+                pe, ptp = e.mean(), st["tp"][members].mean()  # Eq. 38 (PE = ΣE/N_pp)
+                if ptp > p.T_PTp and pe > p.T_PE and e.any():
+                    x, y = st["x"][members][e].mean(), st["y"][members][e].mean()
+                    if self._near_track(x, y):  # the target is tracked already
+                        keep[members] = False
+                    elif len(handed) < len(self.free_groups):
+                        keep[members] = False
+                        handed.append(members)
+        self._start_tracks(f, st, handed, rng)
+        self._update_index_image(st, keep)
+        survivors = {b: {name: st[name][keep & (st["group"] == b)] for name in
+                         ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")} for b in range(self.grid.n_blocks)}
+        pool.set_state(survivors)
+
+    def _near_track(self, x: float, y: float) -> bool:
+        return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)
+
+    def _start_tracks(self, f: int, st: dict, handed: list, rng: np.random.Generator) -> None:
+        n_tpf = self.p.N_tpf
+        for members in handed:
+            if not self.free_groups:
+                break
+            e = st["e"][members] == 1
+            x, y = float(st["x"][members][e].mean()), float(st["y"][members][e].mean())
+            if self._near_track(x, y):
+                continue
+            pick = members[resize_population(len(members), n_tpf, rng.random(max(n_tpf, len(members))))]
+            group = self.free_groups.pop()
+            self.tracks_pool.set_state({group: {name: st[name][pick] for name in
+                                                ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}})
+            track = Track(self.next_track_id, group)
+            self.next_track_id += 1
+            track.path.append((f, x, y, float(st["vx"][members][e].mean()), float(st["vy"][members][e].mean()),
+                               float(st["inten"][members][e].mean()), 1.0))
+            self.active.append(track)
+
+    def _update_index_image(self, st: dict, keep: np.ndarray) -> None:
+        """P_pp: each pixel gets the PP whose particles fall in it; the larger PP wins."""
+        h, w = self.shape
+        self.pp_index[:] = 0
+        x = np.floor(st["x"][keep] + 0.5).astype(np.int64)
+        y = np.floor(st["y"][keep] + 0.5).astype(np.int64)
+        seq = st["seq"][keep]
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (seq > 0)
+        x, y, seq = x[inside], y[inside], seq[inside]
+        if not len(seq):
+            return
+        pps, inverse, counts = np.unique(seq, return_inverse=True, return_counts=True)
+        order = np.argsort(counts[inverse], kind="stable")  # larger PPs written last win
+        self.pp_index[y[order], x[order]] = seq[order]
+
+    def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
+        p, pool = self.p, self.tracks_pool
+        if not self.active:
+            return []
+        pool.load_frame(z)
+        pool.predict(f)
+        pool.weigh()
+        log_mtw = pool.max_log_weights()
+        pool.resample(f)
+        est = pool.estimates()
+        rows = []
+        h, w = self.shape
+        for t in list(self.active):
+            g = t.group
+            t.frames_without_e = t.frames_without_e + 1 if not np.isfinite(est.x[g]) else 0
+            t.confidence = update_confidence(t.confidence, icef(float(log_mtw[g]), log_msw),
+                                             scef(est.cov[g], p.T_devr))
+            if np.isfinite(est.x[g]):  # Eq. 39
+                t.path.append((f, float(est.x[g]), float(est.y[g]), float(est.vx[g]), float(est.vy[g]),
+                               float(est.intensity[g]), t.confidence))
+            x, y = t.last_xy()
+            lost = t.frames_without_e >= LOST_FRAMES or not (-0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5)
+            if t.confidence < p.T_ft or lost:
+                self._end_track(t)
+                continue
+            if t.confidence == 1.0:
+                t.n_rt += 1
+                if t.n_rt > p.T_rt:
+                    t.confirmed = True
+            if t.confirmed and t.path[-1][0] == f:
+                rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
+        self._merge_duplicates()
+        return rows
+
+    def _merge_duplicates(self) -> None:
+        """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends."""
+        for a in sorted(self.active, key=lambda t: t.track_id):
+            for b in [t for t in self.active if t.track_id > a.track_id]:
+                if a in self.active and math.dist(a.last_xy(), b.last_xy()) < DUPLICATE_RADIUS:
+                    self._end_track(b)
+
+    def _end_track(self, t: Track) -> None:
+        self.active.remove(t)
+        self.free_groups.append(t.group)
+        counts = self.tracks_pool.counts.copy()
+        counts[t.group] = 0
+        self.tracks_pool.set_counts(counts)
+        if t.confirmed:
+            self.finished.append(t)
+
+
+def track(frames_or_path, method: str = "sgds", **kw) -> np.ndarray:
+    """Run a tracker over a whole sequence (array (T, H, W) or anything ``tbd_taichi.io`` reads).
+
+    ``method`` is "sgds" (SGDS-PF; whole paths of confirmed tracks) or "pf" (the original PF).
+    """
+    from . import io
+    from .pf import OriginalPF
+
+    source = io.open_frames(frames_or_path)
+    if method == "sgds":
+        tracker = SGDSPF(source.shape, **kw)
+    elif method == "pf":
+        tracker = OriginalPF(source.shape, **kw)
+    else:
+        raise ParameterError(f"method must be 'sgds' or 'pf', got {method!r}")
+    for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
+        tracker.update(frame)
+    return tracker.finish()
