@@ -19,7 +19,7 @@ TABLE2 = (
     (256, 4000, 0.1, 5, 0.7, 9),
     (256, 4000, 0.1, 5, 0.5, 9),
     (200, 4000, 0.1, 5, 0.5, 8),
-    (150, 8000, 0.2, 4, 0.3, 7),
+    (150, 8000, 0.2, 4, 0.2, 6),  # T_ft, T_rt at the lenient ends: 0.3, 7 dropped real targets at 200×200
     (100, 8000, 0.2, 4, 0.11, 5),
 )
 
@@ -42,8 +42,8 @@ class SGDSParams:
     T_PE: float = 0.2  # potential target: PE > T_PE (Table 2)
     T_PTp: float = 4.0  # potential target: PTp > T_PTp (Table 2)
     N_tpf: int = 500  # particles per tracking PF (section 3.2, Fig. 11)
-    T_ft: float = 0.3  # false target below this confidence (Table 2)
-    T_rt: int = 7  # real target once N_rt > T_rt (Table 2)
+    T_ft: float = 0.2  # false target below this confidence (Table 2)
+    T_rt: int = 6  # real target once N_rt > T_rt (Table 2)
     # open in the paper; reasons in the README's parameter table
     P_b: float = 0.05  # birth probability (Eq. 7), typical of Ristic-style PF-TBD
     P_d_search: float = 0.05  # death probability (Eq. 8) in the searching PFs
