@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import ParameterError
+from .errors import InputError, ParameterError
 
 MAD_TO_SIGMA = 1.4826  # σ = 1.4826·MAD for Gaussian noise
 MAX_SAMPLES = 1 << 16  # robust statistics use at most this many pixels (a fixed stride)
@@ -84,6 +84,16 @@ def normalise_frame(frame: np.ndarray, background: str = "median") -> Normalised
     sigma = robust_sigma(frame)
     z = (frame - np.float32(bg)) * np.float32(1.0 / sigma)
     return Normalised(z.astype(np.float32, copy=False), bg, sigma)
+
+
+def normalise_input(frame, shape: tuple[int, int], index: int, background: str = "median") -> np.ndarray:
+    """z of raw frame ``index`` of a stream, after checking its shape and values (InputError otherwise)."""
+    frame = np.asarray(frame)
+    if frame.shape != tuple(shape):
+        raise InputError(f"frame {index} has shape {frame.shape}; the tracker was built for {tuple(shape)}")
+    if not np.isfinite(frame).all():
+        raise InputError(f"frame {index} contains NaN or inf")
+    return normalise_frame(frame, background).z
 
 
 def normalise_sequence(frames: np.ndarray, background: str = "median") -> np.ndarray:

@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from .errors import InputError, ParameterError
-from .normalize import normalise_frame
+from .errors import ParameterError
+from .normalize import normalise_input
 from .params import snr_band
 from .particles import ParticlePool
 from .simulate import intensity_for_snr
@@ -79,12 +79,7 @@ class OriginalPF:
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; returns [(frame, track_id, x, y, vx, vy, intensity, p_exist)] if declared."""
-        frame = np.asarray(frame)
-        if frame.shape != self.shape:
-            raise InputError(f"frame {self.frame} has shape {frame.shape}; the tracker was built for {self.shape}")
-        if not np.isfinite(frame).all():
-            raise InputError(f"frame {self.frame} contains NaN or inf")
-        z = normalise_frame(frame, self.background).z
+        z = normalise_input(frame, self.shape, self.frame, self.background)
         self.pool.step(self.frame, z, systematic=self.systematic)
         est = self.pool.estimates()
         p = float(est.p_exist[0])

@@ -35,7 +35,7 @@ import numpy as np
 
 from . import backend
 from .errors import InputError, ParameterError
-from .normalize import normalise_frame
+from .normalize import normalise_input
 from .params import SGDSParams
 from .particles import ParticlePool
 from .pf import birth_intensity_range
@@ -146,12 +146,7 @@ class SGDSPF:
     def update(self, frame) -> list[tuple]:
         """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
         frame finished now (frame t − 2), or [] for the first two frames."""
-        frame = np.asarray(frame)
-        if frame.shape != self.shape:
-            raise InputError(f"frame {self.frames_in} has shape {frame.shape}; the tracker was built for {self.shape}")
-        if not np.isfinite(frame).all():
-            raise InputError(f"frame {self.frames_in} contains NaN or inf")
-        z = normalise_frame(frame, self.background).z
+        z = normalise_input(frame, self.shape, self.frames_in, self.background)
         self._z[self.frames_in] = z
         self.frames_in += 1
         rows = []
