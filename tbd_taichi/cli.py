@@ -63,7 +63,7 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def _progress(total: int | None, enabled: bool):
+def _progress(enabled: bool):
     """A rich progress bar over frames (a no-op context when disabled)."""
     import contextlib
 
@@ -76,21 +76,18 @@ def _progress(total: int | None, enabled: bool):
 
 def cmd_track(args) -> int:
     from . import io
-    from .pf import OriginalPF
-    from .sgds import MIN_FRAMES, SGDSPF
+    from .sgds import MIN_FRAMES, make_tracker
 
     source = io.open_frames(args.input)
-    if args.method == "sgds":
-        tracker = SGDSPF(source.shape, snr=args.snr, seed=args.seed, engine=args.engine)
-    else:
-        tracker = OriginalPF(source.shape, snr=args.snr, seed=args.seed, engine=args.engine,
-                             n_particles=args.particles, threshold=args.threshold)
+    pf_only = dict(n_particles=args.particles, threshold=args.threshold) if args.method == "pf" else {}
+    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine, **pf_only)
     max_projection = None
-    with _progress(source.n_frames, args.progress) as bar:
+    with _progress(args.progress) as bar:
         task = bar.add_task("frames", total=source.n_frames) if bar else None
         for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
             tracker.update(frame)
-            max_projection = frame if max_projection is None else np.maximum(max_projection, frame)
+            if args.plot:  # the plot's backdrop; not needed otherwise
+                max_projection = frame if max_projection is None else np.maximum(max_projection, frame)
             if bar:
                 bar.advance(task)
     tracks = tracker.finish()

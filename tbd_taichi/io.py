@@ -89,6 +89,17 @@ def checked_frame(frame: np.ndarray, where: str, index: int, shape: tuple[int, i
     return out
 
 
+def stream_frame(frame, shape: tuple[int, int], index: int, owner: str) -> np.ndarray:
+    """Frame ``index`` handed to a streaming ``owner`` (tracker, extractor) as float32, checked for
+    its shape and for NaN/inf."""
+    frame = np.asarray(frame)
+    if frame.shape != tuple(shape):
+        raise InputError(f"frame {index} has shape {frame.shape}; the {owner} was built for {tuple(shape)}")
+    if not np.isfinite(frame).all():
+        raise InputError(f"frame {index} contains NaN or inf")
+    return np.ascontiguousarray(frame, dtype=np.float32)
+
+
 def _array_source(array: np.ndarray, name: str) -> FrameSource:
     _check_dtype(array.dtype, name)
     if array.ndim != 3:

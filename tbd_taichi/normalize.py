@@ -21,7 +21,8 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import InputError, ParameterError
+from .errors import ParameterError
+from .io import stream_frame
 
 MAD_TO_SIGMA = 1.4826  # σ = 1.4826·MAD for Gaussian noise
 MAX_SAMPLES = 1 << 16  # robust statistics use at most this many pixels (a fixed stride)
@@ -34,31 +35,33 @@ def stat_sample(frame: np.ndarray, max_samples: int = MAX_SAMPLES) -> np.ndarray
     return flat[::stride]
 
 
-def robust_sigma(frame: np.ndarray) -> float:
-    """Noise standard deviation 1.4826·MAD (same units as the frame).
+def robust_sigma(frame: np.ndarray, median: float | None = None) -> float:
+    """Noise standard deviation 1.4826·MAD (same units as the frame); ``median`` if already known.
 
     Coarsely quantised frames can have MAD = 0; the standard deviation is used then,
     and 1 for a constant frame (so z is 0 there, not NaN).
     """
     sample = stat_sample(frame)
-    mad = float(np.median(np.abs(sample - np.median(sample))))
+    centre = float(np.median(sample)) if median is None else median
+    mad = float(np.median(np.abs(sample - centre)))
     if mad > 0:
         return MAD_TO_SIGMA * mad
     std = float(sample.std())
     return std if std > 0 else 1.0
 
 
-def median_background(frame: np.ndarray) -> float:
+def median_background(frame: np.ndarray, median: float) -> float:
     """Global background: the frame's median."""
-    return float(np.median(stat_sample(frame)))
+    return median
 
 
-def mean_background(frame: np.ndarray) -> float:
+def mean_background(frame: np.ndarray, median: float) -> float:
     """Global background: the frame's mean."""
     return float(np.asarray(frame, dtype=np.float64).mean())
 
 
-BACKGROUNDS: dict[str, Callable[[np.ndarray], float]] = {
+# background estimators get the frame and its (sampled) median, which σ needs anyway
+BACKGROUNDS: dict[str, Callable[[np.ndarray, float], float]] = {
     "median": median_background,
     "mean": mean_background,
 }
@@ -80,20 +83,16 @@ def normalise_frame(frame: np.ndarray, background: str = "median") -> Normalised
     except KeyError:
         raise ParameterError(f"unknown background {background!r}; choose one of {', '.join(BACKGROUNDS)}") from None
     frame = np.asarray(frame, dtype=np.float32)
-    bg = estimate(frame)
-    sigma = robust_sigma(frame)
+    median = float(np.median(stat_sample(frame)))
+    bg = estimate(frame, median)
+    sigma = robust_sigma(frame, median)
     z = (frame - np.float32(bg)) * np.float32(1.0 / sigma)
     return Normalised(z.astype(np.float32, copy=False), bg, sigma)
 
 
 def normalise_input(frame, shape: tuple[int, int], index: int, background: str = "median") -> np.ndarray:
     """z of raw frame ``index`` of a stream, after checking its shape and values (InputError otherwise)."""
-    frame = np.asarray(frame)
-    if frame.shape != tuple(shape):
-        raise InputError(f"frame {index} has shape {frame.shape}; the tracker was built for {tuple(shape)}")
-    if not np.isfinite(frame).all():
-        raise InputError(f"frame {index} contains NaN or inf")
-    return normalise_frame(frame, background).z
+    return normalise_frame(stream_frame(frame, shape, index, "tracker"), background).z
 
 
 def normalise_sequence(frames: np.ndarray, background: str = "median") -> np.ndarray:

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import backend
-from .errors import InputError, ParameterError
+from .errors import ParameterError
+from .io import stream_frame
 from .numpy_kernels import saliency as nps
 
 ENGINES = ("taichi", "numpy")
@@ -273,14 +274,6 @@ class SaliencyExtractor:
         self.n_pushed = 0
         self.n_emitted = 0
 
-    def _check(self, z) -> np.ndarray:
-        z = np.asarray(z)
-        if z.shape != self.shape:
-            raise InputError(f"frame {self.n_pushed} has shape {z.shape}; this extractor was built for {self.shape}")
-        if not np.isfinite(z).all():
-            raise InputError(f"frame {self.n_pushed} contains NaN or inf")
-        return np.ascontiguousarray(z, dtype=np.float32)
-
     def _slots(self, centre: int, last: int) -> tuple[list[int], float]:
         """Ring slots of frames centre−1..centre+1 that exist in [0, last], and the 3/n scale."""
         slots = [f % 3 if 0 <= f <= last else -1 for f in (centre - 1, centre, centre + 1)]
@@ -299,7 +292,7 @@ class SaliencyExtractor:
 
     def push(self, z) -> list[SaliencyFrame]:
         """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""
-        z = self._check(z)
+        z = stream_frame(z, self.shape, self.n_pushed, "extractor")
         t = self.n_pushed
         self.engine.put_and_energy(t % 3, z)
         self.n_pushed = t + 1

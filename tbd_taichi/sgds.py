@@ -357,21 +357,25 @@ class SGDSPF:
             self.finished.append(t)
 
 
+def make_tracker(method: str, shape, **kw):
+    """A streaming tracker: "sgds" (SGDS-PF) or "pf" (the original PF), keyword arguments passed on."""
+    from .pf import OriginalPF
+
+    trackers = {"sgds": SGDSPF, "pf": OriginalPF}
+    if method not in trackers:
+        raise ParameterError(f"method must be 'sgds' or 'pf', got {method!r}")
+    return trackers[method](shape, **kw)
+
+
 def track(frames_or_path, method: str = "sgds", **kw) -> np.ndarray:
     """Run a tracker over a whole sequence (array (T, H, W) or anything ``tbd_taichi.io`` reads).
 
     ``method`` is "sgds" (SGDS-PF; whole paths of confirmed tracks) or "pf" (the original PF).
     """
     from . import io
-    from .pf import OriginalPF
 
     source = io.open_frames(frames_or_path)
-    if method == "sgds":
-        tracker = SGDSPF(source.shape, **kw)
-    elif method == "pf":
-        tracker = OriginalPF(source.shape, **kw)
-    else:
-        raise ParameterError(f"method must be 'sgds' or 'pf', got {method!r}")
+    tracker = make_tracker(method, source.shape, **kw)
     for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
         tracker.update(frame)
     return tracker.finish()
