@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import weakref
 from dataclasses import dataclass
 
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
@@ -33,6 +34,7 @@ class BackendConfig:
 
 _current: BackendConfig | None = None
 _generation = 0
+_spare: dict = {}  # (generation, key) → field sets whose owners are gone
 
 
 def _ti_arch(name: str):
@@ -104,6 +106,7 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
         raise BackendError(f"could not start Taichi on {name!r}: {exc}; available: {', '.join(available_archs())}") from exc
     _current = wanted
     _generation += 1
+    _spare.clear()
     return _current
 
 
@@ -122,3 +125,16 @@ def current() -> BackendConfig | None:
 def generation() -> int:
     """Counter bumped by every (re)start of the runtime; owners of fields compare it."""
     return _generation
+
+
+def reusable(owner, key, factory):
+    """Taichi fields (and the kernels compiled for them) for ``owner``: a set left by an owner
+    that is gone and had the same ``key`` (field shapes), else ``factory()``.
+
+    Kernels that take fields are compiled for those very fields, so a new tracker with new
+    fields recompiles everything (seconds); reusing the fields of a finished tracker of the
+    same shapes does not.  The caller re-initialises whatever state it relies on."""
+    spare = _spare.setdefault((_generation, key), [])
+    fields = spare.pop() if spare else factory()
+    weakref.finalize(owner, spare.append, fields)
+    return fields

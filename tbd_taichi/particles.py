@@ -91,7 +91,9 @@ class ParticlePool:
             from .kernels.particles import ParticleKernels as Kernels
         else:
             from .numpy_kernels.particles import NumpyParticleKernels as Kernels
-        self.k = Kernels(self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial)
+        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial)
+        self.k = backend.reusable(self, ("particles",) + dims, lambda: Kernels(*dims)) if engine == "taichi" \
+            else Kernels(*dims)
         slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)
         self._put("slot_group", slot_group)
         self._put("off", self.off)
@@ -105,6 +107,10 @@ class ParticlePool:
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
+        for name, value in list(self.params.items()) + [("kind", self.kinds)]:
+            self._put(name, value)
+        self.set_proposal_map({})
+        self.load_labels(np.zeros(self.frame_shape, np.int32))
 
     # ------------------------------------------------------------ host ↔ engine
 

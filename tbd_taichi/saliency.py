@@ -171,75 +171,83 @@ class TaichiSaliencyEngine:
     whole image or for all blocks."""
 
     def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
-        import taichi as ti
-
         from .kernels import saliency as ks
 
         self.ks, self.grid, self.r = ks, grid, window
-        h, w = shape
-        self.shape = (h, w)
-        self.serial = h * w <= SERIAL_PIXELS and backend.current().arch == "cpu"
-        self.n_lanes, valid = lane_layout(w)
-        self.valid = ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes)
-        self.valid.from_numpy(valid)
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.n_lanes, valid = lane_layout(self.shape[1])
+        self.serial = self.shape[0] * self.shape[1] <= SERIAL_PIXELS and backend.current().arch == "cpu"
+        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks), self._fields)
+        f = self.f
+        f.valid.from_numpy(valid)
+        f.d.from_numpy(d)
+        f.block_id.from_numpy(grid.block_id)
+        f.block_offset.from_numpy(grid.offsets)
+        f.block_max.fill(ks.NEG_INF)
+        f.proposal.fill(0)
+        f.n_written.fill(0)
+        self.host_lanes = np.zeros((self.shape[0], self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
+
+    def _fields(self):
+        """The engine's Taichi fields: ring buffers of 8-lane rows, per-row and per-block scratch."""
+        import types
+
+        import taichi as ti
+
+        ks, (h, w), nb = self.ks, self.shape, self.grid.n_blocks
         image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, self.n_lanes))  # noqa: E731
-        self.ring = {name: image(3) for name in ("z", "se_max", "acc", "acc_max")}
-        self.hs, self.hm, self.tmp, self.tmp2, self.acc2 = image(), image(), image(), image(), image()
-        self.z_scalar = ti.field(ti.f32, shape=(3, h, w))
-        self.z_rows = ti.field(ti.f64, shape=(3, h, 2))
-        self.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
-        self.row_x = ti.field(ti.i32, shape=(h, w))
-        self.row_logw = ti.field(ti.f32, shape=(h, w))
-        self.n_row = ti.field(ti.i32, shape=h)
-        self.stats = ti.field(ti.f64, shape=8)
-        self.d = ti.field(ti.f32, shape=(5, 5))
-        self.d.from_numpy(d)
-        self.block_id = ti.field(ti.i32, shape=(h, w))
-        self.block_id.from_numpy(grid.block_id)
-        nb = grid.n_blocks
-        self.block_offset = ti.field(ti.i32, shape=nb)
-        self.block_offset.from_numpy(grid.offsets)
-        self.block_max = ti.field(ti.f32, shape=nb)
-        self.block_max.fill(ks.NEG_INF)
-        self.block_nnz = ti.field(ti.i32, shape=nb)
-        self.block_stats = ti.field(ti.f64, shape=(nb, 4))
-        self.proposal = ti.field(ti.f32, shape=(h, w))
-        self.written = ti.field(ti.i32, shape=h * w)
-        self.n_written = ti.field(ti.i32, shape=())
-        self.entry_pixel = ti.field(ti.i32, shape=h * w)
-        self.entry_logw = ti.field(ti.f32, shape=h * w)
-        self.entry_sal = ti.field(ti.f32, shape=h * w)
-        self.scratch = ti.field(ti.f32, shape=h * w)
-        self.host_lanes = np.zeros((h, self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
+        f = types.SimpleNamespace(valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes),
+                                  ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
+        f.hs, f.hm, f.tmp, f.tmp2, f.acc2 = image(), image(), image(), image(), image()
+        f.z_scalar = ti.field(ti.f32, shape=(3, h, w))
+        f.z_rows = ti.field(ti.f64, shape=(3, h, 2))
+        f.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
+        f.row_x = ti.field(ti.i32, shape=(h, w))
+        f.row_logw = ti.field(ti.f32, shape=(h, w))
+        f.n_row = ti.field(ti.i32, shape=h)
+        f.stats = ti.field(ti.f64, shape=8)
+        f.d = ti.field(ti.f32, shape=(5, 5))
+        f.block_id = ti.field(ti.i32, shape=(h, w))
+        f.block_offset, f.block_max = ti.field(ti.i32, shape=nb), ti.field(ti.f32, shape=nb)
+        f.block_nnz, f.block_stats = ti.field(ti.i32, shape=nb), ti.field(ti.f64, shape=(nb, 4))
+        f.proposal = ti.field(ti.f32, shape=(h, w))
+        f.written, f.n_written = ti.field(ti.i32, shape=h * w), ti.field(ti.i32, shape=())
+        f.entry_pixel, f.entry_logw = ti.field(ti.i32, shape=h * w), ti.field(ti.f32, shape=h * w)
+        f.entry_sal, f.scratch = ti.field(ti.f32, shape=h * w), ti.field(ti.f32, shape=h * w)
+        return f
+
+    @property
+    def proposal(self):
+        return self.f.proposal
 
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         ks = self.ks
-        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.ring["z"], slot, self.z_scalar, self.z_rows, self.serial)
-        ks.energy_collection_max(self.ring["z"], slot, self.valid, self.hs, self.hm, self.tmp, self.tmp2,
-                                 self.ring["se_max"], slot, self.r, self.serial)
+        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.f.ring["z"], slot, self.f.z_scalar, self.f.z_rows, self.serial)
+        ks.energy_collection_max(self.f.ring["z"], slot, self.f.valid, self.f.hs, self.f.hm, self.f.tmp, self.f.tmp2,
+                                 self.f.ring["se_max"], slot, self.r, self.serial)
 
     def first_layer(self, slots, scale: float, dst: int) -> None:
-        self.ks.accumulate_max(self.ring["se_max"], *slots, scale, self.valid, self.ring["acc"], dst, self.tmp,
-                               self.ring["acc_max"], self.r, self.serial)
+        self.ks.accumulate_max(self.f.ring["se_max"], *slots, scale, self.f.valid, self.f.ring["acc"], dst, self.f.tmp,
+                               self.f.ring["acc_max"], self.r, self.serial)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
         ks = self.ks
-        ks.accumulate_moments(self.ring["acc_max"], *slots, scale, self.acc2, self.acc2_rows, self.serial)
-        ks.frame_statistics(self.acc2_rows, self.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.stats)
-        ks.segment_and_lef(self.acc2, self.ring["acc"], self.ring["acc_max"], slot, self.z_scalar, self.valid, self.d,
-                           a, self.stats, self.row_x, self.row_logw, self.n_row, self.serial)
-        ks.block_proposal(self.row_x, self.row_logw, self.n_row, self.block_id, self.block_offset, self.block_nnz,
-                          self.block_max, self.entry_pixel, self.entry_logw, self.entry_sal, self.scratch,
-                          self.block_stats, self.proposal, self.written, self.n_written)
+        ks.accumulate_moments(self.f.ring["acc_max"], *slots, scale, self.f.acc2, self.f.acc2_rows, self.serial)
+        ks.frame_statistics(self.f.acc2_rows, self.f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.f.stats)
+        ks.segment_and_lef(self.f.acc2, self.f.ring["acc"], self.f.ring["acc_max"], slot, self.f.z_scalar, self.f.valid, self.f.d,
+                           a, self.f.stats, self.f.row_x, self.f.row_logw, self.f.n_row, self.serial)
+        ks.block_proposal(self.f.row_x, self.f.row_logw, self.f.n_row, self.f.block_id, self.f.block_offset, self.f.block_nnz,
+                          self.f.block_max, self.f.entry_pixel, self.f.entry_logw, self.f.entry_sal, self.f.scratch,
+                          self.f.block_stats, self.f.proposal, self.f.written, self.f.n_written)
         if not details:
             return {}
-        stats, blocks = self.stats.to_numpy(), self.block_stats.to_numpy()
+        stats, blocks = self.f.stats.to_numpy(), self.f.block_stats.to_numpy()
         nnz = blocks[:, 2].astype(np.int64)
-        entries = self.entry_pixel.to_numpy()
+        entries = self.f.entry_pixel.to_numpy()
         mask = np.zeros(self.shape, bool)
         for off, n in zip(self.grid.offsets, nnz):
             mask.ravel()[entries[off:off + n]] = True
-        return {"proposal": self.proposal.to_numpy(), "mask": mask,
+        return {"proposal": self.f.proposal.to_numpy(), "mask": mask,
                 "threshold": float(stats[0]), "i_range": (float(stats[1]), float(stats[2])),
                 "n_eff": blocks[:, 0], "k": blocks[:, 1].astype(np.int64), "nnz": nnz}
 

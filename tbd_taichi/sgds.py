@@ -96,6 +96,60 @@ def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
 
 
+def stable_order(keys: np.ndarray) -> np.ndarray:
+    """Stable argsort of non-negative integer ``keys``; radix sort (O(n)) when they fit in 16 bits."""
+    small = len(keys) == 0 or int(keys.max()) < 1 << 16
+    return np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
+
+
+def dense_ranks(values: np.ndarray, table_limit: int = 1 << 22) -> tuple[np.ndarray, int]:
+    """Rank of each integer among the distinct values (0 … k − 1, in value order), and k.
+    A lookup table replaces the sort when the values span at most ``table_limit``."""
+    if len(values) == 0:
+        return np.zeros(0, np.int64), 0
+    lo, span = int(values.min()), int(values.max()) - int(values.min()) + 1
+    if span > table_limit:
+        distinct, ranks = np.unique(values, return_inverse=True)
+        return ranks.reshape(-1), len(distinct)
+    present = np.zeros(span, bool)
+    present[values - lo] = True
+    return (np.cumsum(present) - 1)[values - lo], int(present.sum())
+
+
+def populations(group: np.ndarray, seq: np.ndarray):
+    """Particle populations as (block, Seq) pairs, ordered by block then Seq.
+
+    Returns (block of each PP, PP index of each particle, particles per PP)."""
+    seq_rank, n_seq = dense_ranks(seq.astype(np.int64))
+    code, n_codes = dense_ranks(group.astype(np.int64) * max(n_seq, 1) + seq_rank)
+    counts = np.bincount(code, minlength=n_codes)
+    first = np.zeros(n_codes, np.int64)
+    first[code[::-1]] = np.arange(len(code))[::-1]  # a member of each PP, for its block
+    return group[first].astype(np.int64), code, counts
+
+
+def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:
+    """Eq. 37: particles to remove from each PP so that each block loses ``per_block``,
+    smallest PPs first (ties by Seq) and the last one partially."""
+    order = np.lexsort((np.arange(len(counts)), counts, pp_block))
+    c, b = counts[order], pp_block[order]
+    before = np.cumsum(c) - c
+    block_start = np.searchsorted(b, b)  # first sorted PP of the same block
+    before = before - before[block_start]
+    take = np.empty_like(counts)
+    take[order] = np.clip(per_block - before, 0, c)
+    return take
+
+
+def rank_in_population(inverse: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """0-based position of each particle among its PP's particles, in slot order."""
+    order = stable_order(inverse)
+    start = np.cumsum(counts) - counts
+    rank = np.empty_like(inverse)
+    rank[order] = np.arange(len(inverse)) - start[inverse[order]]
+    return rank
+
+
 class SGDSPF:
     """Streaming SGDS-PF tracker.
 
@@ -228,46 +282,36 @@ class SGDSPF:
         return log_msw
 
     def _eliminate_and_hand_over(self, f: int) -> None:
-        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp."""
+        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp.
+
+        A PP is a (block, Seq) pair; all PPs of all blocks are handled at once with sorts and
+        ``np.bincount`` (no loop over blocks or PPs)."""
         p, pool = self.p, self.search
         st = pool.state()
-        keep = np.ones(len(st["x"]), bool)
+        pp_block, inverse, counts = populations(st["group"], st["seq"])
+        take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
+        keep = rank_in_population(inverse, counts) >= take[inverse]  # resampled order is random: Eq. 37's random subset
+        e = (st["e"] == 1) & keep
+        n_pp = np.bincount(inverse, weights=keep, minlength=len(counts))
+        ne = np.bincount(inverse, weights=e, minlength=len(counts))
+        tp_sum = np.bincount(inverse, weights=np.where(keep, st["tp"], 0), minlength=len(counts))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            pe, ptp = ne / n_pp, tp_sum / n_pp  # Eq. 38 (PE = ΣE/N_pp)
+            px = np.bincount(inverse, weights=np.where(e, st["x"], 0), minlength=len(counts)) / ne
+            py = np.bincount(inverse, weights=np.where(e, st["y"], 0), minlength=len(counts)) / ne
         handed = []
-        rng = np.random.default_rng([self.seed, f])
-        for b in range(self.grid.n_blocks):
-            idx = np.flatnonzero(st["group"] == b)
-            if not len(idx):
-                continue
-            seq = st["seq"][idx]
-            pps, inverse, counts = np.unique(seq, return_inverse=True, return_counts=True)
-            order = np.argsort(counts, kind="stable")
-            to_remove = int(round(p.P_e * p.N_sump))
-            removed = 0
-            for k in order:  # Eq. 37: smallest PPs first, the last one partially
-                if removed >= to_remove:
-                    break
-                members = idx[inverse == k]
-                take = min(len(members), to_remove - removed)
-                keep[members[:take]] = False  # resampled order is random: the first ones are a random subset
-                removed += take
-            for k, pp in enumerate(pps):
-                members = idx[(inverse == k) & keep[idx]]
-                if not len(members):
-                    continue
-                e = st["e"][members] == 1
-                pe, ptp = e.mean(), st["tp"][members].mean()  # Eq. 38 (PE = ΣE/N_pp)
-                if ptp > p.T_PTp and pe > p.T_PE and e.any():
-                    x, y = st["x"][members][e].mean(), st["y"][members][e].mean()
-                    if self._near_track(x, y):  # the target is tracked already
-                        keep[members] = False
-                    elif len(handed) < len(self.free_groups):
-                        keep[members] = False
-                        handed.append(members)
-        self._start_tracks(f, st, handed, rng)
-        self._update_index_image(st, keep)
-        survivors = {b: {name: st[name][keep & (st["group"] == b)] for name in
-                         ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")} for b in range(self.grid.n_blocks)}
-        pool.set_state(survivors)
+        for k in np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0)):
+            members = np.flatnonzero((inverse == k) & keep)
+            if self._near_track(px[k], py[k]):  # the target is tracked already
+                keep[members] = False
+            elif len(handed) < len(self.free_groups):
+                keep[members] = False
+                handed.append(members)
+        self._start_tracks(f, st, handed, np.random.default_rng([self.seed, f]))
+        self._update_index_image(st, keep, counts[inverse])
+        bounds = np.searchsorted(st["group"][keep], np.arange(1, self.grid.n_blocks))
+        kept = {name: np.split(st[name][keep], bounds) for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
+        pool.set_state({b: {name: kept[name][b] for name in kept} for b in range(self.grid.n_blocks)})
 
     def _near_track(self, x: float, y: float) -> bool:
         return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)
@@ -291,20 +335,15 @@ class SGDSPF:
                                float(st["inten"][members][e].mean()), 1.0))
             self.active.append(track)
 
-    def _update_index_image(self, st: dict, keep: np.ndarray) -> None:
-        """P_pp: each pixel gets the PP whose particles fall in it; the larger PP wins."""
+    def _update_index_image(self, st: dict, keep: np.ndarray, pp_size: np.ndarray) -> None:
+        """P_pp: each pixel gets the PP whose particles fall in it; the larger PP (``pp_size`` per particle) wins."""
         h, w = self.shape
         self.pp_index[:] = 0
-        x = np.floor(st["x"][keep] + 0.5).astype(np.int64)
-        y = np.floor(st["y"][keep] + 0.5).astype(np.int64)
-        seq = st["seq"][keep]
-        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h) & (seq > 0)
-        x, y, seq = x[inside], y[inside], seq[inside]
-        if not len(seq):
-            return
-        pps, inverse, counts = np.unique(seq, return_inverse=True, return_counts=True)
-        order = np.argsort(counts[inverse], kind="stable")  # larger PPs written last win
-        self.pp_index[y[order], x[order]] = seq[order]
+        x = np.floor(st["x"] + 0.5).astype(np.int64)
+        y = np.floor(st["y"] + 0.5).astype(np.int64)
+        inside = keep & (x >= 0) & (x < w) & (y >= 0) & (y < h) & (st["seq"] > 0)
+        order = stable_order(pp_size[inside])  # larger PPs written last win
+        self.pp_index[y[inside][order], x[inside][order]] = st["seq"][inside][order]
 
     def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
         p, pool = self.p, self.tracks_pool

@@ -72,9 +72,9 @@ def test_energy_collection(rng, shape):
     for kind in KINDS:
         z = random_image(rng, shape, kind)
         engine.put_and_energy(1, z)
-        got = from_lanes(engine.tmp.to_numpy()[0], shape[1])  # I_se
+        got = from_lanes(engine.f.tmp.to_numpy()[0], shape[1])  # I_se
         np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
-        se_max = from_lanes(engine.ring["se_max"].to_numpy()[1], shape[1])
+        se_max = from_lanes(engine.f.ring["se_max"].to_numpy()[1], shape[1])
         np.testing.assert_array_equal(se_max, nps.max_filter(got))
         p = np.maximum(z.astype(np.float64), 0)
         total = ndi.correlate(p, np.ones((3, 3)), mode="constant")
