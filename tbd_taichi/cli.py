@@ -79,23 +79,26 @@ def cmd_track(args) -> int:
     from .sgds import MIN_FRAMES, make_tracker
 
     source = io.open_frames(args.input)
-    pf_only = dict(n_particles=args.particles, threshold=args.threshold) if args.method == "pf" else {}
-    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine, **pf_only)
+    method_only = dict(n_particles=args.particles, threshold=args.threshold) if args.method == "pf" else {}
+    stream = args.method == "sgds" and args.paths == "online"  # rows go to the CSV as they come: constant memory
+    if stream:
+        method_only["history"] = False
+    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine, **method_only)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     max_projection = None
-    with _progress(args.progress) as bar:
+    with _progress(args.progress) as bar, tables.CsvTableWriter(out, tables.TRACK_COLUMNS) as writer:
         task = bar.add_task("frames", total=source.n_frames) if bar else None
         for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
-            tracker.update(frame)
+            rows = tracker.update(frame)
+            if stream:
+                writer.write(rows)
             if args.plot:  # the plot's backdrop; not needed otherwise
                 max_projection = frame if max_projection is None else np.maximum(max_projection, frame)
             if bar:
                 bar.advance(task)
-    tracks = tracker.finish()
-    if args.method == "sgds" and args.paths == "online":
-        tracks = tracker.online()
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tables.write_csv(tracks, out)
+        writer.write(tracker.finish())
+    tracks = tables.read_tracks(out)
     n_tracks = len(np.unique(tracks["track_id"]))
     print(f"{args.method}: {len(tracks)} rows of {n_tracks} track(s) -> {out}")
     truth = tables.read_truth(args.truth) if args.truth else None

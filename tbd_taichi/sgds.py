@@ -28,6 +28,7 @@ target gives one track; of two tracks closer than 2 px the younger one is remove
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import cv2
@@ -57,7 +58,7 @@ class Track:
     n_rt: int = 0
     confirmed: bool = False
     frames_without_e: int = 0
-    path: list = field(default_factory=list)  # (frame, x, y, vx, vy, intensity, confidence)
+    path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
 
     def last_xy(self) -> tuple[float, float]:
         return self.path[-1][1], self.path[-1][2]
@@ -159,17 +160,21 @@ class SGDSPF:
     it has just finished, which is two frames behind (saliency needs frame f + 2).
     ``finish()`` processes the last two frames and returns every confirmed track with its
     whole path, which may begin before the track was confirmed (its history in the tracking PF).
+
+    ``history=False`` keeps no paths (only each track's last point) and no online rows, so memory
+    stays constant on endless streams; then ``finish()`` returns only the rows of the two flushed
+    frames, and the caller keeps what ``update`` returned.
     """
 
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
-                 max_tracks: int = 32, background: str = "median", **params):
+                 max_tracks: int = 32, background: str = "median", history: bool = True, **params):
         if len(shape) != 2 or min(shape) < 8:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 8, got {tuple(shape)}")
         if max_tracks < 1:
             raise ParameterError("max_tracks must be ≥ 1")
         self.p = SGDSParams.for_snr(snr, **params)
         self.shape = (int(shape[0]), int(shape[1]))
-        self.background, self.seed = background, int(seed)
+        self.background, self.seed, self.history = background, int(seed), bool(history)
         if engine == "taichi":
             backend.ensure_init(arch)
         p = self.p
@@ -212,9 +217,8 @@ class SGDSPF:
         """Process the last two frames and return the tracks table of every confirmed track's whole path."""
         if self.frames_in < MIN_FRAMES:
             raise InputError(f"{self.frames_in} frame(s), but SGDS-PF needs at least {MIN_FRAMES}")
-        for s in self.saliency.flush():
-            self._process(s.frame)
-        return self.whole_paths()
+        rows = [row for s in self.saliency.flush() for row in self._process(s.frame)]
+        return self.whole_paths() if self.history else make_table(rows, TRACK_DTYPE)
 
     def whole_paths(self) -> np.ndarray:
         rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.confirmed
@@ -237,7 +241,8 @@ class SGDSPF:
             del self._z[old]
         log_msw = self._search_step(f, z, self._proposal())
         rows = self._track_step(f, z, log_msw)
-        self.online_rows += rows
+        if self.history:
+            self.online_rows += rows
         return rows
 
     def _suppress_tracked(self, proposal: np.ndarray) -> np.ndarray:
@@ -329,7 +334,7 @@ class SGDSPF:
             group = self.free_groups.pop()
             self.tracks_pool.set_state({group: {name: st[name][pick] for name in
                                                 ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}})
-            track = Track(self.next_track_id, group)
+            track = Track(self.next_track_id, group, path=deque(maxlen=None if self.history else 1))
             self.next_track_id += 1
             track.path.append((f, x, y, float(st["vx"][members][e].mean()), float(st["vy"][members][e].mean()),
                                float(st["inten"][members][e].mean()), 1.0))
@@ -392,7 +397,7 @@ class SGDSPF:
         counts = self.tracks_pool.counts.copy()
         counts[t.group] = 0
         self.tracks_pool.set_counts(counts)
-        if t.confirmed:
+        if t.confirmed and self.history:
             self.finished.append(t)
 
 

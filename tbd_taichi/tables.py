@@ -40,14 +40,39 @@ def make_table(rows, dtype: np.dtype) -> np.ndarray:
     return np.sort(table, order=list(dtype.names[:2]))
 
 
+class CsvTableWriter:
+    """Write table rows to a CSV as they come (constant memory); floats with 4 decimals.
+
+    ``with CsvTableWriter(path, TRACK_COLUMNS) as out: out.write(rows)`` where ``rows`` are
+    tuples in column order or a structured array."""
+
+    def __init__(self, path, columns: tuple[str, ...]):
+        self.columns = tuple(columns)
+        self.integer = [c in ("frame", "track_id", "target_id") for c in self.columns]
+        self.handle = open(path, "w", newline="")
+        self.writer = csv.writer(self.handle)
+        self.writer.writerow(self.columns)
+        self.n_rows = 0
+
+    def write(self, rows) -> None:
+        for row in rows:
+            self.writer.writerow([int(v) if i else f"{float(v):.4f}" for v, i in zip(tuple(row), self.integer)])
+            self.n_rows += 1
+
+    def close(self) -> None:
+        self.handle.close()
+
+    def __enter__(self) -> "CsvTableWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def write_csv(table: np.ndarray, path) -> None:
     """Write a tracks or truth table with its header; floats with 4 decimals."""
-    names = table.dtype.names
-    with open(path, "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(names)
-        for row in table:
-            writer.writerow([int(row[n]) if table.dtype[n].kind == "i" else f"{float(row[n]):.4f}" for n in names])
+    with CsvTableWriter(path, table.dtype.names) as out:
+        out.write(table)
 
 
 def read_csv(path, columns: tuple[str, ...]) -> np.ndarray:

@@ -115,3 +115,28 @@ def test_bad_input():
         tracker.finish()
     with pytest.raises(InputError, match="at least 5"):
         tbd.track(np.zeros((4, 32, 32), np.float32))
+
+
+def test_history_off_keeps_memory_constant_on_a_long_stream():
+    """history=False: no per-frame state accumulates (the 100,000-frame check is
+    benchmarks/memory_stream.py); the same frames with history=True do grow, so this can fail."""
+    import gc
+    import tracemalloc
+
+    scene = tbd.simulate((32, 32), 450, snr=3.0, seed=4, speed=(0.0, 0.0), q1=0.0)  # a still target
+    growth = {}
+    for history in (False, True):
+        tracker = SGDSPF((32, 32), snr=3.0, seed=4, history=history)
+        rows = 0
+        tracemalloc.start()
+        for t, frame in enumerate(scene.frames):
+            rows += len(tracker.update(frame))
+            if t == 150:
+                gc.collect()
+                start = tracemalloc.get_traced_memory()[0]
+        gc.collect()
+        growth[history] = tracemalloc.get_traced_memory()[0] - start
+        tracemalloc.stop()
+        assert rows > 250  # the target is held either way
+    assert growth[False] < 0.3 * growth[True], growth  # True keeps ~300 B of rows and path per frame
+    assert growth[True] > 60_000, growth
