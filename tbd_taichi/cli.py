@@ -134,6 +134,46 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _float_list(text: str, name: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise TBDError(f"{name} takes a comma list of numbers, got {text!r}") from None
+    if not values or min(values) <= 0:
+        raise TBDError(f"{name} needs at least one number > 0, got {text!r}")
+    return values
+
+
+def cmd_evaluate_suite(args) -> int:
+    import os
+    import shlex
+
+    from . import suite
+
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    if not methods or set(methods) - set(suite.METHODS):
+        raise TBDError(f"--methods takes a comma list of {','.join(suite.METHODS)}, got {args.methods!r}")
+    if args.tests < 1 or (args.workers is not None and args.workers < 1):
+        raise TBDError("--tests and --workers must be ≥ 1")
+    snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
+    sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
+    tests = suite.QUICK["tests"] if args.quick and args.tests == 100 else args.tests
+    runs = suite.plan(snrs, sizes, methods, tests, args.seed)
+    out_dir = Path(args.out_dir)
+    workers = args.workers or os.cpu_count() or 1
+    print(f"{len(runs)} runs ({len(methods)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
+          f"{workers} worker(s) -> {out_dir}")
+    results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
+                                       progress=not args.no_progress)
+    command = "tbd-taichi " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["evaluate-suite"] \
+        else f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} --size {args.size} " \
+             f"--methods {','.join(methods)} --seed {args.seed} --out-dir {out_dir}"
+    report = suite.write_report(results, out_dir, command, completed, len(runs))
+    print(suite.markdown_table(suite.summarise(results)))
+    print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))
+    return 0 if completed else 130
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tbd-taichi", description=(
         "Track-before-detect of dim infrared point targets with Taichi particle filters. "
@@ -191,6 +231,24 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--progress", action="store_true", help="show a progress bar")
     _common(tr)
     tr.set_defaults(func=cmd_track)
+
+    es = sub.add_parser("evaluate-suite", help="Monte Carlo evaluation of SGDS-PF and the original PF (paper Figs. 14-15)",
+                        description="Simulate SNR x size x N test sequences, run each method, and write TSR, mean EDT, "
+                                    "mean DSR, false tracks and ms/frame as a markdown table, JSON and PNG figures. "
+                                    "Runs are appended to OUT_DIR/suite_runs.jsonl as they finish: Ctrl-C keeps them "
+                                    "and a rerun skips them.")
+    es.add_argument("--tests", type=int, default=100, help="sequences per condition (default 100)")
+    es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition")
+    es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
+    es.add_argument("--size", choices=("all", "50", "200"), default="all",
+                    help="50 (50x50, 70 frames), 200 (200x200, 150 frames) or all (default)")
+    es.add_argument("--methods", default="sgds,pf", help="comma list of sgds,pf (default both)")
+    es.add_argument("--seed", type=int, default=0, help="test k simulates scenario seed SEED+k (default 0)")
+    es.add_argument("--workers", type=int, default=None, help="parallel processes (default: the core count)")
+    es.add_argument("--out-dir", default="suite-results", help="where the table, JSON, figures and runs go")
+    es.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _common(es)
+    es.set_defaults(func=cmd_evaluate_suite)
 
     be = sub.add_parser("bench", help="time each stage, Taichi against NumPy",
                         description="Median milliseconds per frame for each stage after a warm-up, for each engine "

@@ -109,6 +109,12 @@ class ParticlePool:
         self.kinds = np.zeros(self.n_groups, np.int32)
         for name, value in list(self.params.items()) + [("kind", self.kinds)]:
             self._put(name, value)
+        for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born"):  # reused fields start clean
+            target = getattr(self.k, name)
+            if isinstance(target, np.ndarray):
+                target[...] = 0
+            else:
+                target.fill(0)
         self.set_proposal_map({})
         self.load_labels(np.zeros(self.frame_shape, np.int32))
 

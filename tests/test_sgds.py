@@ -140,3 +140,19 @@ def test_history_off_keeps_memory_constant_on_a_long_stream():
         assert rows > 250  # the target is held either way
     assert growth[False] < 0.3 * growth[True], growth  # True keeps ~300 B of rows and path per frame
     assert growth[True] > 60_000, growth
+
+
+@pytest.mark.parametrize("method", ["sgds", "pf"])
+def test_reused_fields_give_the_same_tracks(method):
+    """A second tracker of the same shapes reuses the first one's Taichi fields (no recompile)
+    and must not see any of its state."""
+    scene = tbd.simulate((40, 40), 30, snr=2.5, seed=6)
+    tables_out = []
+    for _ in range(2):
+        tracker = tbd.sgds.make_tracker(method, (40, 40), snr=2.5, seed=3)
+        for frame in scene.frames:
+            tracker.update(frame)
+        tables_out.append(tracker.finish())
+        del tracker  # its fields go back to the spare list
+    assert len(tables_out[0]) > 10
+    np.testing.assert_array_equal(tables_out[0], tables_out[1])

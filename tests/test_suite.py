@@ -1,0 +1,71 @@
+"""The Monte Carlo evaluation suite: plan, resumable execution, summary, report and CLI."""
+import json
+
+import numpy as np
+import pytest
+
+from tbd_taichi import cli, suite
+
+
+def test_plan_pairs_methods_on_the_same_scenarios():
+    runs = suite.plan(snrs=(1.2, 2.0), sizes=((50, 70),), methods=("sgds", "pf"), tests=3, seed=10)
+    assert len(runs) == 12 and len({r.key for r in runs}) == 12
+    assert {r.seed for r in runs} == {10, 11, 12}
+    by_seed = {(r.snr, r.test): {x.method for x in runs if (x.snr, x.test) == (r.snr, r.test)} for r in runs}
+    assert all(m == {"sgds", "pf"} for m in by_seed.values())
+
+
+def fake(run, dsr, edt=0.5):
+    return dict(vars(run), key=run.key, dsr=dsr, edt=edt, false_tracks=1 if dsr < 0.2 else 0, ospa=1.0,
+                ms_per_frame=10.0)
+
+
+def test_summary_follows_eqs_47_to_49():
+    runs = suite.plan(snrs=(1.4,), sizes=((50, 70),), methods=("sgds",), tests=4)
+    results = [fake(r, d, e) for r, d, e in zip(runs, [0.9, 0.5, 0.1, 0.2], [0.4, 0.6, 3.0, 9.0])]
+    (row,) = suite.summarise(results)
+    assert row["tsr"] == 0.5  # DSR > T1 = 0.2 in two of four runs (Eq. 49, strict)
+    assert row["edt"] == pytest.approx(0.5)  # EDT over the successful runs only
+    assert row["dsr"] == pytest.approx(0.425) and row["false_tracks"] == 0.25
+
+
+def test_execute_keeps_finished_runs_and_resumes(tmp_path, monkeypatch):
+    runs = suite.plan(snrs=(1.4, 2.0), sizes=((50, 70),), methods=("sgds",), tests=2)
+    calls = []
+
+    def interrupted(run):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(run.key)
+        return fake(run, 0.9)
+
+    monkeypatch.setattr(suite, "run_one", interrupted)
+    path = tmp_path / "runs.jsonl"
+    results, completed = suite.execute(runs, path, workers=1, progress=False)
+    assert not completed and [r["key"] for r in results] == calls
+    monkeypatch.setattr(suite, "run_one", lambda run: fake(run, 0.3))
+    results, completed = suite.execute(runs, path, workers=1, progress=False)
+    assert completed and len(results) == 4
+    assert [r["dsr"] for r in results] == [0.9, 0.9, 0.3, 0.3]  # the first two were not rerun
+    assert len(path.read_text().splitlines()) == 4
+    report = suite.write_report(results, tmp_path, "cmd", True, 4)
+    assert "| 50×50×70 | 1.4 | SGDS-PF | 2 | 1.00 |" in report.read_text()
+    assert (tmp_path / "suite_50x50.png").stat().st_size > 5000
+
+
+def test_one_real_run_scores_the_tracker():
+    (run,) = suite.plan(snrs=(3.0,), sizes=((40, 40),), methods=("sgds",), tests=1, seed=2)
+    row = suite.run_one(run)
+    assert row["dsr"] > 0.6 and row["edt"] < 1.0 and row["false_tracks"] == 0 and row["ms_per_frame"] > 0
+
+
+def test_cli_evaluate_suite(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert cli.main(["evaluate-suite", "--snrs", "3", "--size", "50", "--tests", "1", "--workers", "1",
+                     "--methods", "pf", "--no-progress", "--out-dir", str(out)]) == 0
+    summary = json.loads((out / "suite.json").read_text())
+    (row,) = summary["rows"]
+    assert row["method"] == "pf" and row["n"] == 1 and np.isfinite(row["ms_per_frame"])
+    assert "evaluate-suite" in summary["command"]
+    assert cli.main(["evaluate-suite", "--methods", "kalman", "--out-dir", str(out)]) == 2
+    assert "--methods" in capsys.readouterr().err
