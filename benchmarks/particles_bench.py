@@ -26,7 +26,7 @@ def main() -> None:
     args = parser.parse_args()
     rows, raw = [], []
     for particles, groups, frames in CASES:
-        runs = [run_bench((256, 320), n_frames=frames, arch=args.arch, particles=particles, groups=groups)
+        runs = [run_bench((256, 320), n_frames=frames, arch=args.arch, particles=particles, groups=groups, pipeline=False)
                 for _ in range(args.repeats)]
         raw.extend(runs)
         ti_ms = statistics.median(r["engines"]["taichi"]["stages"]["particles"] for r in runs)

@@ -28,7 +28,7 @@ def main() -> None:
     args = parser.parse_args()
     rows, raw = [], []
     for shape in SIZES:
-        runs = [run_bench(shape, snr=args.snr, n_frames=args.frames, arch=args.arch) for _ in range(args.repeats)]
+        runs = [run_bench(shape, snr=args.snr, n_frames=args.frames, arch=args.arch, pipeline=False) for _ in range(args.repeats)]
         raw.extend(runs)
         ti_ms = statistics.median(r["engines"]["taichi"]["stages"]["saliency"] for r in runs)
         np_ms = statistics.median(r["engines"]["numpy"]["stages"]["saliency"] for r in runs)

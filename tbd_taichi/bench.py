@@ -1,15 +1,23 @@
 """``tbd-taichi bench``: median ms/frame per stage, Taichi against NumPy in the same run.
 
-Stages (each timed per frame after a warm-up, median over the timed frames):
+The whole SGDS-PF pipeline runs through the public API, one :meth:`SGDSPF.update` per frame
+with the Table 2 preset of ``snr``, on a simulated sequence of that SNR.  Stages (each timed
+per frame after a warm-up, median over the timed frames):
 
 * ``normalise``: z = (frame − median)/(1.4826·MAD) on the host;
 * ``saliency``: the whole multi-frame saliency stage (Eqs. 20–33), from z to the
-  per-block proposal map, one :meth:`SaliencyExtractor.push` per frame;
-* ``particles`` (with ``particles > 0``): one full particle-filter step of a pool of
-  that many particles split into ``groups`` filters (existence, newborn draws,
-  propagation, weighting, normalisation, resampling), :meth:`ParticlePool.step`.
+  per-block proposal map;
+* ``searching``: Algorithm 1 (all blocks' searching PFs, PP bookkeeping, hand-over);
+* ``tracking``: Algorithm 2 (all tracking PFs, confirmation, paths);
+* ``particles`` (with ``particles > 0``): one full particle-filter step of a separate pool
+  of that many particles split into ``groups`` filters, :meth:`ParticlePool.step`.
 
-``total`` is the sum of the stage medians.
+``pipeline=False`` (``--no-pipeline``) times only ``normalise`` and ``saliency`` (with a
+:class:`SaliencyExtractor`), plus ``particles`` if asked.
+
+``total`` is the sum of the stage medians; ``update_ms`` the median wall time of one
+``update`` call (or of the saliency step) and ``fps`` its inverse; ``peak_rss_mib`` the process's peak resident memory
+after the engine's run (it includes everything measured before it in the same process).
 """
 from __future__ import annotations
 
@@ -19,10 +27,8 @@ import numpy as np
 
 from . import backend
 from .normalize import normalise_frame
-from .params import SGDSParams
 from .particles import ParticlePool
 from .pf import birth_intensity_range
-from .saliency import SaliencyExtractor
 from .simulate import simulate
 
 WARMUP = 3
@@ -47,41 +53,77 @@ def benchmark_pool(shape, particles: int, groups: int, engine: str, snr: float, 
     return pool
 
 
-def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1) -> dict:
-    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
-    ext = SaliencyExtractor(frames.shape[1:], snr=snr, block_size=SGDSParams.for_snr(snr).L_ib, engine=engine,
-                             details=False)
-    pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
-    stages: dict[str, list[float]] = {"normalise": [], "saliency": []}
-    if pool is not None:
-        stages["particles"] = []
-    for t, frame in enumerate(frames):
+def pipeline_stepper(shape, snr: float, engine: str):
+    """One SGDSPF.update per call; returns the seconds each pipeline stage took."""
+    from .sgds import SGDSPF
+
+    tracker = SGDSPF(shape, snr=snr, engine=engine, history=False)
+
+    def step(frame: np.ndarray) -> dict[str, float]:
+        before = dict(tracker.stage_seconds)
+        tracker.update(frame)
+        return {name: tracker.stage_seconds[name] - before[name] for name in before}
+    return step
+
+
+def saliency_stepper(shape, snr: float, engine: str):
+    """Normalisation and the saliency stage only (no particle filters)."""
+    from .params import SGDSParams
+    from .saliency import SaliencyExtractor
+
+    ext = SaliencyExtractor(shape, snr=snr, block_size=SGDSParams.for_snr(snr).L_ib, engine=engine, details=False)
+
+    def step(frame: np.ndarray) -> dict[str, float]:
         t0 = time.perf_counter()
         z = normalise_frame(frame).z
         t1 = time.perf_counter()
         ext.push(z)
-        t2 = time.perf_counter()
+        return {"normalise": t1 - t0, "saliency": time.perf_counter() - t1}
+    return step
+
+
+def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
+                 pipeline: bool = True) -> dict:
+    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
+    step = (pipeline_stepper if pipeline else saliency_stepper)(frames.shape[1:], snr, engine)
+    pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
+    stages: dict[str, list[float]] = {}
+    update = []
+    for t, frame in enumerate(frames):
+        t0 = time.perf_counter()
+        seconds = step(frame)
+        t1 = time.perf_counter()
         if pool is not None:
-            pool.step(t, z)
-        t3 = time.perf_counter()
+            pool.step(t, normalise_frame(frame).z)
+            seconds["particles"] = time.perf_counter() - t1
         if t >= WARMUP:
-            stages["normalise"].append(t1 - t0)
-            stages["saliency"].append(t2 - t1)
-            if pool is not None:
-                stages["particles"].append(t3 - t2)
+            update.append(t1 - t0)
+            for name, value in seconds.items():
+                stages.setdefault(name, []).append(value)
     medians = {name: _median_ms(v) for name, v in stages.items()}
-    return {"stages": medians, "total": float(sum(medians.values()))}
+    update_ms = _median_ms(update)
+    return {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
+            "fps": 1e3 / update_ms, "peak_rss_mib": peak_rss_mib()}
+
+
+def peak_rss_mib() -> float:
+    """Peak resident set size of this process, MiB."""
+    import resource
+    import sys
+
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB on Linux
 
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
-              seed: int = 0, particles: int = 0, groups: int = 1) -> dict:
+              seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result."""
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
-              "particles": particles, "groups": groups, "engines": {}}
+              "particles": particles, "groups": groups, "pipeline": pipeline, "engines": {}}
     for engine in engines:
-        result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups)
+        result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups, pipeline)
     return result
 
 
@@ -96,10 +138,15 @@ def format_table(result: dict) -> str:
     pool = f", {result['particles']} particles in {result['groups']} group(s)" if result.get("particles") else ""
     lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
              f"{result['frames']} timed frames{pool}, arch {result['arch']}", head]
-    for stage in stages:
-        vals = {n: (engines[n]["total"] if stage == "total" else engines[n]["stages"][stage]) for n in names}
+    for stage in stages + ["update", "fps", "peak MiB"]:
+        vals = {n: _row_value(engines[n], stage) for n in names}
         row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)
-        if ratio:
+        if ratio and stage not in ("fps", "peak MiB"):
             row += f"{vals['numpy'] / vals['taichi']:>13.1f}x"
         lines.append(row)
     return "\n".join(lines)
+
+
+def _row_value(engine: dict, stage: str) -> float:
+    extra = {"total": "total", "update": "update_ms", "fps": "fps", "peak MiB": "peak_rss_mib"}
+    return engine[extra[stage]] if stage in extra else engine["stages"][stage]

@@ -129,7 +129,7 @@ def cmd_bench(args) -> int:
     if args.particles < 0 or args.groups < 1 or (args.particles and args.particles < args.groups):
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
-                       particles=args.particles, groups=args.groups)
+                       particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -251,8 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
     es.set_defaults(func=cmd_evaluate_suite)
 
     be = sub.add_parser("bench", help="time each stage, Taichi against NumPy",
-                        description="Median milliseconds per frame for each stage after a warm-up, for each engine "
-                                    "in the same run, on a simulated sequence.")
+                        description="Median milliseconds per frame for each stage of SGDSPF.update (normalise, "
+                                    "saliency, searching, tracking) after a warm-up, for each engine in the same run, "
+                                    "on a simulated sequence with the --snr preset; fps and peak memory.")
     be.add_argument("--shape", type=int, nargs=2, metavar=("H", "W"), default=[256, 320],
                     help="frame height and width, px (default 256 320)")
     be.add_argument("--snr", type=float, default=1.4, help="SNR preset: the lowest SNR to detect (default 1.4)")
@@ -261,6 +262,8 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--particles", type=int, default=0,
                     help="also time one particle-filter step of a pool this large (stage 'particles'; default 0: off)")
     be.add_argument("--groups", type=int, default=1, help="filters the pool is split into (default 1)")
+    be.add_argument("--no-pipeline", action="store_true",
+                    help="time only normalisation and saliency (and --particles), not the whole SGDSPF.update")
     be.add_argument("--json", action="store_true", help="print one JSON object as the last line")
     _common(be)
     be.set_defaults(func=cmd_bench)

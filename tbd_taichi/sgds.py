@@ -28,6 +28,7 @@ target gives one track; of two tracks closer than 2 px the younger one is remove
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -44,6 +45,7 @@ from .saliency import SaliencyExtractor
 from .tables import TRACK_DTYPE, make_table
 
 MIN_FRAMES = 5
+PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
 
@@ -199,17 +201,27 @@ class SGDSPF:
         self.frames_in = 0
         self.online_rows: list[tuple] = []
         self._z = {}
+        self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
+
+    def _clock(self, stage: str, t0: float) -> float:
+        now = time.perf_counter()
+        self.stage_seconds[stage] += now - t0
+        return now
 
     # ------------------------------------------------------------ input
 
     def update(self, frame) -> list[tuple]:
         """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
         frame finished now (frame t − 2), or [] for the first two frames."""
+        t0 = time.perf_counter()
         z = normalise_input(frame, self.shape, self.frames_in, self.background)
         self._z[self.frames_in] = z
         self.frames_in += 1
+        t0 = self._clock("normalise", t0)
+        done = self.saliency.push(z)
+        self._clock("saliency", t0)
         rows = []
-        for s in self.saliency.push(z):
+        for s in done:
             rows += self._process(s.frame)
         return rows
 
@@ -239,8 +251,11 @@ class SGDSPF:
         z = self._z.pop(f)
         for old in [k for k in self._z if k < f]:
             del self._z[old]
+        t0 = time.perf_counter()
         log_msw = self._search_step(f, z, self._proposal())
+        t0 = self._clock("searching", t0)
         rows = self._track_step(f, z, log_msw)
+        self._clock("tracking", t0)
         if self.history:
             self.online_rows += rows
         return rows
