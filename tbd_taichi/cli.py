@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import backend, metrics, tables
+from .background import BACKGROUNDS, DEFAULT_BACKGROUND
 from .errors import TBDError
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
@@ -83,7 +84,8 @@ def cmd_track(args) -> int:
     stream = args.method == "sgds" and args.paths == "online"  # rows go to the CSV as they come: constant memory
     if stream:
         method_only["history"] = False
-    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine, **method_only)
+    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine,
+                           background=args.background, bad_pixels=not args.no_bad_pixels, **method_only)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     max_projection = None
@@ -228,6 +230,12 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--truth", default=None, help="truth CSV (frame,target_id,x,y,...): print DSR, EDT, false tracks, OSPA")
     tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail (.mp4 or .avi)")
     tr.add_argument("--plot", default=None, help="PNG of the tracks over the max-projection (with the truth if given)")
+    tr.add_argument("--background", choices=BACKGROUNDS, default=DEFAULT_BACKGROUND,
+                    help="background suppression before the filters: none (global median and σ, as in the paper; "
+                         "default), mean, spatial (hollow local mean: use it for real video with clutter) or temporal "
+                         "(running mean, still cameras), the last three with a local noise σ")
+    tr.add_argument("--no-bad-pixels", action="store_true",
+                    help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", action="store_true", help="show a progress bar")
     _common(tr)
     tr.set_defaults(func=cmd_track)

@@ -145,3 +145,25 @@ def evaluate(tracks: np.ndarray, truth: np.ndarray, t0: float = T0, ospa_c: floa
         "tracks": int(len(np.unique(tracks["track_id"]))),
         "targets": {str(k): v for k, v in scores.items()},
     }
+
+
+def box_scores(tracks: np.ndarray, boxes: np.ndarray, n_frames: int, grow: float = 2.0) -> dict:
+    """Real-data scores against labelled boxes (frame,x,y,w,h), each box grown by ``grow`` px:
+
+    * ``detection_rate``: fraction of labelled frames with a track point inside the grown box;
+    * ``false_points``: track points outside every grown box, per frame of the sequence;
+    * ``first_confirmation``: frames from the first labelled frame to the first hit (NaN: none).
+    """
+    box = {int(b["frame"]): (b["x"] - grow, b["x"] + b["w"] + grow, b["y"] - grow, b["y"] + b["h"] + grow)
+           for b in boxes}
+    hits, false = set(), 0
+    for f, x, y in zip(tracks["frame"].tolist(), tracks["x"].tolist(), tracks["y"].tolist()):
+        b = box.get(int(f))
+        if b is not None and b[0] <= x <= b[1] and b[2] <= y <= b[3]:
+            hits.add(int(f))
+        else:
+            false += 1
+    first = min(box) if box else 0
+    return dict(detection_rate=len(hits) / len(box) if box else float("nan"),
+                false_points=false / max(n_frames, 1),
+                first_confirmation=float(min(hits) - first) if hits else float("nan"))

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from .errors import ParameterError
-from .normalize import normalise_input
+from .background import DEFAULT_BACKGROUND, Preprocessor
 from .params import snr_band
 from .particles import ParticlePool
 from .simulate import intensity_for_snr
@@ -58,19 +58,20 @@ class OriginalPF:
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
                  n_particles: int | None = None, pb: float = 0.05, pd: float = 0.05, threshold: float = 0.5,
                  q1: float = 0.001, q2: float = 0.01, psf_sigma: float = 0.7, vmax: float = 1.0,
-                 background: str = "median", systematic: bool = False):
+                 background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, systematic: bool = False):
         if len(shape) != 2 or min(shape) < 5:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 5, got {shape}")
         if snr <= 0 or not 0 < threshold < 1:
             raise ParameterError("snr must be > 0 and threshold in (0, 1)")
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_particles = int(n_particles or table3_particles(self.shape, snr))
-        self.threshold, self.background, self.systematic = threshold, background, systematic
+        self.threshold, self.systematic = threshold, systematic
         self.pool = ParticlePool([self.n_particles], self.shape, engine=engine, seed=seed, q1=q1, q2=q2,
                                  psf_sigma=psf_sigma, arch=arch)
         self.pool.configure_groups([0], "uniform", pb=pb, pd=pd, vmax=vmax,
                                    intensity=birth_intensity_range(snr, psf_sigma))
         self.pool.set_counts([self.n_particles])  # all particles start absent (E = 0)
+        self.preprocess = Preprocessor(self.shape, background, bad_pixels, engine)
         self.frame = 0
         self.track_id = 0
         self.declared = False
@@ -79,7 +80,7 @@ class OriginalPF:
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; returns [(frame, track_id, x, y, vx, vy, intensity, p_exist)] if declared."""
-        z = normalise_input(frame, self.shape, self.frame, self.background)
+        z = self.preprocess(frame, self.frame)
         self.pool.step(self.frame, z, systematic=self.systematic)
         est = self.pool.estimates()
         p = float(est.p_exist[0])

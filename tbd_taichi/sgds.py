@@ -37,7 +37,7 @@ import numpy as np
 
 from . import backend
 from .errors import InputError, ParameterError
-from .normalize import normalise_input
+from .background import DEFAULT_BACKGROUND, Preprocessor
 from .params import SGDSParams
 from .particles import ParticlePool
 from .pf import birth_intensity_range
@@ -169,17 +169,19 @@ class SGDSPF:
     """
 
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
-                 max_tracks: int = 32, background: str = "median", history: bool = True, **params):
+                 max_tracks: int = 32, background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True,
+                 history: bool = True, **params):
         if len(shape) != 2 or min(shape) < 8:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 8, got {tuple(shape)}")
         if max_tracks < 1:
             raise ParameterError("max_tracks must be ≥ 1")
         self.p = SGDSParams.for_snr(snr, **params)
         self.shape = (int(shape[0]), int(shape[1]))
-        self.background, self.seed, self.history = background, int(seed), bool(history)
+        self.seed, self.history = int(seed), bool(history)
         if engine == "taichi":
             backend.ensure_init(arch)
         p = self.p
+        self.preprocess = Preprocessor(self.shape, background, bad_pixels, engine)
         self.saliency = SaliencyExtractor(self.shape, snr=p.snr, block_size=p.L_ib, psf_sigma=p.psf_sigma,
                                           engine=engine, details=False)
         self.grid = self.saliency.grid
@@ -214,7 +216,7 @@ class SGDSPF:
         """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
         frame finished now (frame t − 2), or [] for the first two frames."""
         t0 = time.perf_counter()
-        z = normalise_input(frame, self.shape, self.frames_in, self.background)
+        z = self.preprocess(frame, self.frames_in)
         self._z[self.frames_in] = z
         self.frames_in += 1
         t0 = self._clock("normalise", t0)

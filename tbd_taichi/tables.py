@@ -19,6 +19,7 @@ from .errors import InputError
 
 TRACK_COLUMNS = ("frame", "track_id", "x", "y", "vx", "vy", "intensity", "confidence")
 TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
+BOX_COLUMNS = ("frame", "x", "y", "w", "h")  # labelled target boxes (drone-ir): corner x = column, y = row
 
 
 def _dtype(columns: tuple[str, ...]) -> np.dtype:
@@ -106,3 +107,8 @@ def read_tracks(path) -> np.ndarray:
 def read_truth(path) -> np.ndarray:
     """Truth CSV ``frame,target_id,x,y,vx,vy,intensity``."""
     return read_csv(path, TRUTH_COLUMNS)
+
+
+def read_boxes(path) -> np.ndarray:
+    """A target-box CSV (frame,x,y,w,h[,…]): one labelled box per row, corner and size in px."""
+    return read_csv(path, BOX_COLUMNS)

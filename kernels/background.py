@@ -1,0 +1,91 @@
+"""Background suppression, local noise and bad-pixel kernels (issue 7), on ndarrays.
+
+Every kernel takes (H, W) float32 ndarrays (NumPy arrays on the CPU), so it compiles once
+per process whatever the image size.  The NumPy twin is
+``tbd_taichi.numpy_kernels.background``.  Borders are replicated (the nearest pixel
+inside the image), as in ``cv2.BORDER_REPLICATE`` and ``scipy.ndimage`` mode "nearest".
+Running sums are f64, rounded to f32 once.
+"""
+import taichi as ti
+
+F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+
+
+@ti.kernel
+def box_sum_rows(src: F2, dst: F2, r: ti.i32):
+    """dst[i, j] = Σ_{|d| ≤ r} src[i, clamp(j + d)]: a (2r+1)-wide running sum along each row."""
+    h, w = src.shape[0], src.shape[1]
+    for i in range(h):
+        acc = ti.f64(0.0)
+        for d in range(-r, r + 1):
+            acc += ti.f64(src[i, ti.max(ti.min(d, w - 1), 0)])
+        for j in range(w):
+            dst[i, j] = ti.cast(acc, ti.f32)
+            acc += ti.f64(src[i, ti.min(j + r + 1, w - 1)]) - ti.f64(src[i, ti.max(j - r, 0)])
+
+
+@ti.kernel
+def box_sum_cols(src: F2, dst: F2, r: ti.i32):
+    """dst[i, j] = Σ_{|d| ≤ r} src[clamp(i + d), j]: the column pass of the separable box sum."""
+    h, w = src.shape[0], src.shape[1]
+    for j in range(w):
+        acc = ti.f64(0.0)
+        for d in range(-r, r + 1):
+            acc += ti.f64(src[ti.max(ti.min(d, h - 1), 0), j])
+        for i in range(h):
+            dst[i, j] = ti.cast(acc, ti.f32)
+            acc += ti.f64(src[ti.min(i + r + 1, h - 1), j]) - ti.f64(src[ti.max(i - r, 0), j])
+
+
+@ti.kernel
+def hollow_residual(x: F2, outer: F2, inner: F2, n_outer: ti.f32, n_inner: ti.f32, out: F2):
+    """x minus the mean of the ring between two box sums (outer minus inner window), raw units."""
+    for i, j in x:
+        out[i, j] = x[i, j] - (outer[i, j] - inner[i, j]) / (n_outer - n_inner)
+
+
+@ti.kernel
+def running_residual(x: F2, bg: F2, alpha: ti.f32, first: ti.i32, out: F2):
+    """Temporal background: out = x − B, then B ← B + α(x − B); B = x on the first frame."""
+    for i, j in x:
+        if first:
+            bg[i, j] = x[i, j]
+        out[i, j] = x[i, j] - bg[i, j]
+        bg[i, j] = bg[i, j] + alpha * (x[i, j] - bg[i, j])
+
+
+@ti.kernel
+def clipped_abs(r: F2, clip: ti.f32, out: F2):
+    """min(|r|, clip): the robust input of the local noise estimate."""
+    for i, j in r:
+        out[i, j] = ti.min(ti.abs(r[i, j]), clip)
+
+
+@ti.kernel
+def standardise(r: F2, abs_sum: F2, n: ti.f32, to_sigma: ti.f32, floor: ti.f32, out: F2):
+    """z = r / max(to_sigma · abs_sum / n, floor): residual over the local noise σ."""
+    for i, j in r:
+        out[i, j] = r[i, j] / ti.max(to_sigma * abs_sum[i, j] / n, floor)
+
+
+@ti.kernel
+def isolated_spikes(z: F2, rate: F2, rho: ti.f32, z_hi: ti.f32, ratio: ti.f32, rate_max: ti.f32, out: F2):
+    """Bad pixels: a pixel is a spike when |z| > z_hi and every 8-neighbour has |z| < ratio·|z|
+    (a point target's PSF lights its neighbours); rate ← (1−ρ)·rate + ρ·spike; out = 0 where
+    rate > rate_max (a persistent outlier: hot, dead or blinking), else z."""
+    h, w = z.shape[0], z.shape[1]
+    for i, j in z:
+        a = ti.abs(z[i, j])
+        neighbours = 0.0
+        for di, dj in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+            if ti.static(di != 0 or dj != 0):
+                ii, jj = i + di, j + dj
+                if 0 <= ii < h and 0 <= jj < w:
+                    neighbours = ti.max(neighbours, ti.abs(z[ii, jj]))
+        spike = 0.0
+        if a > z_hi and neighbours < ratio * a:
+            spike = 1.0
+        rate[i, j] = (1.0 - rho) * rate[i, j] + rho * spike
+        out[i, j] = z[i, j]
+        if rate[i, j] > rate_max:
+            out[i, j] = 0.0
