@@ -36,7 +36,7 @@ import numpy as np
 from . import backend
 from .errors import ParameterError
 from .io import stream_frame
-from .normalize import normalise_frame, robust_sigma
+from .normalize import mean_background, normalise_frame, robust_sigma
 
 BACKGROUNDS = ("none", "mean", "spatial", "temporal")
 DEFAULT_BACKGROUND = "none"  # see the module notes; real video: "spatial"
@@ -69,7 +69,7 @@ class Preprocessor:
         self.k, self.shape = k, (int(shape[0]), int(shape[1]))
         self.background, self.bad_pixels = background, bool(bad_pixels)
         new = lambda: np.zeros(self.shape, np.float32)  # noqa: E731
-        self.residual, self.tmp, self.sum_a, self.sum_b, self.z = new(), new(), new(), new(), new()
+        self.residual, self.tmp, self.sum_a, self.sum_b = new(), new(), new(), new()
         self.temporal_bg, self.spike_rate = new(), new()
         self.n_frames = 0
 
@@ -97,7 +97,7 @@ class Preprocessor:
         """frame − background (raw units) for the mean, spatial and temporal backgrounds."""
         r = self.residual
         if self.background == "mean":
-            r[...] = x - np.float32(x.astype(np.float64).mean())
+            r[...] = x - np.float32(mean_background(x, 0.0))
         elif self.background == "spatial":
             self.box_sum(x, self.sum_a, OUTER_RADIUS)
             self.box_sum(x, self.sum_b, GUARD_RADIUS)
@@ -112,9 +112,9 @@ class Preprocessor:
         sigma = robust_sigma(r)
         self.k.clipped_abs(r, NOISE_CLIP * sigma, self.sum_a)
         self.box_sum(self.sum_a, self.sum_b, NOISE_RADIUS)
-        self.k.standardise(r, self.sum_b, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, NOISE_FLOOR * sigma,
-                           self.z)
-        return self.z.copy()
+        z = np.empty(self.shape, np.float32)  # a new array: callers keep recent frames
+        self.k.standardise(r, self.sum_b, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, NOISE_FLOOR * sigma, z)
+        return z
 
     def bad_pixel_map(self) -> np.ndarray:
         """Pixels currently neutralised as bad (bool, H × W)."""

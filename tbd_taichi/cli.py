@@ -11,6 +11,7 @@ import numpy as np
 from . import backend, metrics, tables
 from .background import BACKGROUNDS, DEFAULT_BACKGROUND
 from .errors import TBDError
+from .progress import progress_bar
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
              "(a GPU if there is one, else the CPU)")
@@ -64,17 +65,6 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def _progress(enabled: bool):
-    """A rich progress bar over frames (a no-op context when disabled)."""
-    import contextlib
-
-    if not enabled:
-        return contextlib.nullcontext(None)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    return Progress(TextColumn("tracking"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), transient=True)
-
-
 def cmd_track(args) -> int:
     from . import io
     from .sgds import MIN_FRAMES, make_tracker
@@ -89,7 +79,8 @@ def cmd_track(args) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     max_projection = None
-    with _progress(args.progress) as bar, tables.CsvTableWriter(out, tables.TRACK_COLUMNS) as writer:
+    with progress_bar("tracking", args.progress, transient=True) as bar, \
+            tables.CsvTableWriter(out, tables.TRACK_COLUMNS) as writer:
         task = bar.add_task("frames", total=source.n_frames) if bar else None
         for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
             rows = tracker.update(frame)
@@ -99,8 +90,9 @@ def cmd_track(args) -> int:
                 max_projection = frame if max_projection is None else np.maximum(max_projection, frame)
             if bar:
                 bar.advance(task)
-        writer.write(tracker.finish())
-    tracks = tables.read_tracks(out)
+        final = tracker.finish()
+        writer.write(final)
+    tracks = tables.read_tracks(out) if stream else final  # streamed rows live only in the file
     n_tracks = len(np.unique(tracks["track_id"]))
     print(f"{args.method}: {len(tracks)} rows of {n_tracks} track(s) -> {out}")
     truth = tables.read_truth(args.truth) if args.truth else None
@@ -148,7 +140,6 @@ def _float_list(text: str, name: str) -> tuple[float, ...]:
 
 def cmd_evaluate_suite(args) -> int:
     import os
-    import shlex
 
     from . import suite
 
@@ -167,9 +158,8 @@ def cmd_evaluate_suite(args) -> int:
           f"{workers} worker(s) -> {out_dir}")
     results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
                                        progress=not args.no_progress)
-    command = "tbd-taichi " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["evaluate-suite"] \
-        else f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} --size {args.size} " \
-             f"--methods {','.join(methods)} --seed {args.seed} --out-dir {out_dir}"
+    command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
+               f"--size {args.size} --methods {','.join(methods)} --seed {args.seed} --out-dir {out_dir}")
     report = suite.write_report(results, out_dir, command, completed, len(runs))
     print(suite.markdown_table(suite.summarise(results)))
     print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))

@@ -10,9 +10,9 @@ offset and gain) are first brought to zero-mean, unit-variance noise:
 * σ is the median absolute deviation scaled by 1.4826, which equals the standard
   deviation for Gaussian noise and ignores the few bright target pixels.
 
-After normalisation the filters use σ = 1.  The background estimators are kept in
-the ``BACKGROUNDS`` table, so that local (spatial) and temporal estimates can be
-added as further entries without changing the callers.
+After normalisation the filters use σ = 1.  These global estimates are the
+``none`` and ``mean`` backgrounds of ``tbd_taichi.background.Preprocessor``, which
+adds local (spatial) and temporal backgrounds with a local σ for cluttered video.
 """
 from __future__ import annotations
 
@@ -22,7 +22,6 @@ from typing import Callable
 import numpy as np
 
 from .errors import ParameterError
-from .io import stream_frame
 
 MAD_TO_SIGMA = 1.4826  # σ = 1.4826·MAD for Gaussian noise
 MAX_SAMPLES = 1 << 16  # robust statistics use at most this many pixels (a fixed stride)
@@ -88,11 +87,6 @@ def normalise_frame(frame: np.ndarray, background: str = "median") -> Normalised
     sigma = robust_sigma(frame, median)
     z = (frame - np.float32(bg)) * np.float32(1.0 / sigma)
     return Normalised(z.astype(np.float32, copy=False), bg, sigma)
-
-
-def normalise_input(frame, shape: tuple[int, int], index: int, background: str = "median") -> np.ndarray:
-    """z of raw frame ``index`` of a stream, after checking its shape and values (InputError otherwise)."""
-    return normalise_frame(stream_frame(frame, shape, index, "tracker"), background).z
 
 
 def normalise_sequence(frames: np.ndarray, background: str = "median") -> np.ndarray:

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
+from .progress import progress_bar
 
 SNRS = (1.2, 1.4, 1.6, 1.8, 2.0)
 SIZES = ((50, 70), (200, 150))  # (side px, frames)
@@ -112,7 +113,9 @@ def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu
     todo = [r for r in runs if r.key not in done]
     completed = True
     runs_file.parent.mkdir(parents=True, exist_ok=True)
-    with open(runs_file, "a") as out, _bar(progress, len(runs), len(runs) - len(todo)) as (bar, task):
+    with open(runs_file, "a") as out, progress_bar("evaluation runs", progress) as bar:
+        task = bar.add_task("runs", total=len(runs), completed=len(runs) - len(todo)) if bar is not None else None
+
         def keep(row: dict) -> None:
             done[row["key"]] = row
             out.write(json.dumps(row) + "\n")
@@ -135,28 +138,6 @@ def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu
         except KeyboardInterrupt:
             completed = False
     return [done[r.key] for r in runs if r.key in done], completed
-
-
-class _bar:
-    """A rich progress bar over runs (nothing when disabled)."""
-
-    def __init__(self, enabled: bool, total: int, finished: int):
-        self.enabled, self.total, self.finished = enabled, total, finished
-        self.progress = None
-
-    def __enter__(self):
-        if not self.enabled:
-            return None, None
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-        self.progress = Progress(TextColumn("evaluation runs"), BarColumn(), MofNCompleteColumn(),
-                                 TimeRemainingColumn())
-        self.progress.start()
-        return self.progress, self.progress.add_task("runs", total=self.total, completed=self.finished)
-
-    def __exit__(self, *exc):
-        if self.progress is not None:
-            self.progress.stop()
 
 
 def summarise(results: list[dict]) -> list[dict]:
