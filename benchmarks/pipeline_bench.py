@@ -1,9 +1,10 @@
 """The whole SGDS-PF pipeline (SGDSPF.update) per stage, Taichi against NumPy in the same run.
 
 320×256 (the paper's camera format) with the SNR 1.2, 1.4 and 2.0 presets, and 1024×1024 with
-the 1.4 preset.  Writes docs/results/bench_pipeline_<arch>.md and .json.
+the 1.4 preset; on a GPU backend also 4096×4096.  Writes bench_pipeline_<arch>.md and .json
+into --out (default docs/results).
 
-    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20]
+    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20] [--out docs/results]
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 from tbd_taichi.bench import format_table, run_bench
 
 CASES = [((256, 320), 1.2), ((256, 320), 1.4), ((256, 320), 2.0), ((1024, 1024), 1.4)]
+GPU_CASES = [((4096, 4096), 1.4)]
 OUT = Path(__file__).resolve().parent.parent / "docs" / "results"
 
 
@@ -21,19 +23,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--frames", type=int, default=20)
+    parser.add_argument("--out", default=str(OUT), help="output folder (default docs/results)")
     args = parser.parse_args()
+    cases = CASES + (GPU_CASES if args.arch != "cpu" else [])
     results, lines = [], [f"# SGDS-PF pipeline benchmark ({args.arch})", "",
                           f"`python benchmarks/pipeline_bench.py --arch {args.arch} --frames {args.frames}` "
                           "(same as `tbd-taichi bench --shape H W --snr S`); median ms/frame after a 3-frame warm-up.", ""]
-    for shape, snr in CASES:
-        frames = args.frames if shape[0] < 1024 else max(5, args.frames // 4)
+    for shape, snr in cases:
+        frames = args.frames if shape[0] < 1024 else max(5, args.frames // (4 if shape[0] < 4096 else 8))
         result = run_bench(shape, snr=snr, n_frames=frames, arch=args.arch)
         results.append(result)
         table = format_table(result)
         print(table, flush=True)
         lines += ["```", table, "```", ""]
-    (OUT / f"bench_pipeline_{args.arch}.md").write_text("\n".join(lines))
-    (OUT / f"bench_pipeline_{args.arch}.json").write_text(json.dumps(results, indent=1))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"bench_pipeline_{args.arch}.md").write_text("\n".join(lines))
+    (out / f"bench_pipeline_{args.arch}.json").write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":

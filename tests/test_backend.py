@@ -5,19 +5,23 @@ import taichi as ti
 import tbd_taichi
 from tbd_taichi import backend
 from tbd_taichi.errors import BackendError
+from conftest import TEST_ARCH
 
 
 def test_cpu_is_default_and_repeated_init_is_a_no_op():
-    cfg = tbd_taichi.init()
-    gen = backend.generation()
-    assert cfg.arch == "cpu"
-    assert tbd_taichi.init("cpu") is cfg
-    assert backend.generation() == gen
-    assert ti.lang.impl.current_cfg().arch == ti.cpu
+    try:
+        cfg = tbd_taichi.init()
+        gen = backend.generation()
+        assert cfg.arch == "cpu"
+        assert tbd_taichi.init("cpu") is cfg
+        assert backend.generation() == gen
+        assert ti.lang.impl.current_cfg().arch == ti.cpu
+    finally:
+        tbd_taichi.init(TEST_ARCH)
 
 
 def test_offline_cache_is_on():
-    tbd_taichi.init("cpu")
+    tbd_taichi.init(TEST_ARCH)
     assert ti.lang.impl.current_cfg().offline_cache
 
 
@@ -28,7 +32,7 @@ def test_changed_settings_restart_the_runtime():
         assert backend.generation() == gen + 1
         assert ti.lang.impl.current_cfg().cpu_max_num_threads == 1
     finally:
-        tbd_taichi.init("cpu")
+        tbd_taichi.init(TEST_ARCH)
 
 
 def test_unknown_arch_is_a_clear_error():
@@ -44,7 +48,7 @@ def test_missing_backend_lists_what_is_available(arch):
     with pytest.raises(BackendError, match=r"not available|no GPU backend") as info:
         tbd_taichi.init(arch)
     assert "available: cpu" in str(info.value)
-    assert tbd_taichi.init("cpu").arch == "cpu"
+    assert tbd_taichi.init(TEST_ARCH).arch == TEST_ARCH
 
 
 def test_auto_falls_back_to_cpu_silently():
@@ -52,7 +56,7 @@ def test_auto_falls_back_to_cpu_silently():
     try:
         assert tbd_taichi.init("auto").arch == expected[0]
     finally:
-        tbd_taichi.init("cpu")
+        tbd_taichi.init(TEST_ARCH)
 
 
 def test_bad_thread_count():

@@ -7,6 +7,7 @@ import pytest
 import tbd_taichi
 from tbd_taichi.errors import ParameterError
 from tbd_taichi.particles import ParticlePool
+from conftest import TEST_ARCH
 
 SHAPE = (23, 31)  # odd, not a multiple of anything
 CAPS = [700, 1500, 300]
@@ -260,6 +261,6 @@ def test_same_results_with_one_and_two_threads(rng):
         tbd_taichi.init("cpu", threads=2)
         two = run()
     finally:
-        tbd_taichi.init("cpu")
+        tbd_taichi.init(TEST_ARCH)
     for key in one:
         np.testing.assert_array_equal(one[key], two[key])

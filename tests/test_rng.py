@@ -5,6 +5,7 @@ import pytest
 import tbd_taichi
 from tbd_taichi.kernels import rng as trng
 from tbd_taichi.numpy_kernels import rng as nrng
+from conftest import TEST_ARCH
 
 N = 200_000
 
@@ -86,5 +87,5 @@ def test_same_numbers_with_one_and_two_threads():
         tbd_taichi.init("cpu", threads=2)
         two = taichi_draws("normal", N, 1, 2, 3), taichi_draws("hash", N, 1, 2, 3)
     finally:
-        tbd_taichi.init("cpu")
+        tbd_taichi.init(TEST_ARCH)
     assert np.array_equal(one[0], two[0]) and np.array_equal(one[1], two[1])
