@@ -5,6 +5,7 @@ command can be passed (for example ``--tests 10`` or ``--quick``).
 
     python benchmarks/evaluation_suite.py [--tests N] [--workers N] ...
 """
+import os
 import sys
 from pathlib import Path
 
@@ -13,4 +14,4 @@ from tbd_taichi import cli
 OUT = Path(__file__).resolve().parent.parent / "docs" / "results"
 
 if __name__ == "__main__":
-    sys.exit(cli.main(["evaluate-suite", "--out-dir", str(OUT)] + sys.argv[1:]))
+    sys.exit(cli.main(["evaluate-suite", "--out-dir", os.path.relpath(OUT)] + sys.argv[1:]))

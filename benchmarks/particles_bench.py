@@ -8,12 +8,11 @@ markdown table and the raw JSON to ``--out``.
 """
 import argparse
 import json
-import platform
 import statistics
 from pathlib import Path
 
 import tbd_taichi as tbd
-from tbd_taichi.bench import run_bench
+from tbd_taichi.bench import machine_description, run_bench
 
 CASES = [(36_000, 6, 20), (1_000_000, 1, 5)]  # particles, groups, timed frames
 
@@ -41,7 +40,7 @@ def main() -> None:
              "Median ms per full step (existence, newborn draws, propagation, weighting, normalisation, "
              f"resampling) on a 320×256 frame, median of {args.repeats} runs after a 3-frame warm-up.", "",
              f"Command: `python benchmarks/particles_bench.py --arch {args.arch} --repeats {args.repeats}`; "
-             f"machine: {platform.machine()}, tbd-taichi {tbd.__version__}.", "",
+             f"machine: {machine_description()}, tbd-taichi {tbd.__version__}.", "",
              "| particles | groups | Taichi ms | NumPy ms | NumPy/Taichi |", "|---|---|---|---|---|"]
     lines += [f"| {p:,} | {g} | {t:.2f} | {n:.2f} | {n / t:.1f}× |" for p, g, t, n in rows]
     (out / f"bench_particles_{arch}.md").write_text("\n".join(lines) + "\n")

@@ -8,12 +8,11 @@ keeps the median of the per-run medians, and writes a markdown table and the raw
 """
 import argparse
 import json
-import platform
 import statistics
 from pathlib import Path
 
 import tbd_taichi as tbd
-from tbd_taichi.bench import run_bench
+from tbd_taichi.bench import machine_description, run_bench
 
 SIZES = [(200, 200), (256, 320), (1024, 1024), (2048, 2048)]
 
@@ -41,7 +40,7 @@ def main() -> None:
              f"Median ms/frame of the saliency stage (Eqs. 20–33, normalised frame to proposal map), SNR preset "
              f"{args.snr}, median of {args.repeats} runs × {args.frames} timed frames after a 3-frame warm-up.", "",
              f"Command: `python benchmarks/saliency_bench.py --arch {args.arch} --repeats {args.repeats}`; "
-             f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, tbd-taichi {tbd.__version__}.", "",
+             f"machine: {machine_description()}, tbd-taichi {tbd.__version__}.", "",
              "| H×W | Taichi ms | NumPy ms | NumPy/Taichi |", "|---|---|---|---|"]
     lines += [f"| {h}×{w} | {t:.2f} | {n:.2f} | {n / t:.1f}× |" for (h, w), t, n in rows]
     (out / f"bench_saliency_{arch}.md").write_text("\n".join(lines) + "\n")

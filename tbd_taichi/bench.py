@@ -21,6 +21,8 @@ after the engine's run (it includes everything measured before it in the same pr
 """
 from __future__ import annotations
 
+import os
+import platform
 import time
 
 import numpy as np
@@ -106,6 +108,17 @@ def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0
     update_ms = _median_ms(update)
     return {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
             "fps": 1e3 / update_ms, "peak_rss_mib": peak_rss_mib()}
+
+
+def machine_description() -> str:
+    """The CPU model and logical CPU count, e.g. "Intel(R) Xeon(R) Processor, 16 CPUs"."""
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), model)
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} CPUs"
 
 
 def peak_rss_mib() -> float:

@@ -151,7 +151,9 @@ def cmd_evaluate_suite(args) -> int:
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
     sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
     tests = suite.QUICK["tests"] if args.quick and args.tests == 100 else args.tests
-    runs = suite.plan(snrs, sizes, methods, tests, args.seed)
+    if args.tracker_snr is not None and args.tracker_snr <= 0:
+        raise TBDError(f"--tracker-snr must be > 0, got {args.tracker_snr}")
+    runs = suite.plan(snrs, sizes, methods, tests, args.seed, args.tracker_snr or 0.0)
     out_dir = Path(args.out_dir)
     workers = args.workers or os.cpu_count() or 1
     print(f"{len(runs)} runs ({len(methods)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
@@ -159,7 +161,8 @@ def cmd_evaluate_suite(args) -> int:
     results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
                                        progress=not args.no_progress)
     command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
-               f"--size {args.size} --methods {','.join(methods)} --seed {args.seed} --out-dir {out_dir}")
+               f"--size {args.size} --methods {','.join(methods)} --seed {args.seed} "
+               + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "") + f"--out-dir {out_dir}")
     report = suite.write_report(results, out_dir, command, completed, len(runs))
     print(suite.markdown_table(suite.summarise(results)))
     print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))
@@ -242,6 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="50 (50x50, 70 frames), 200 (200x200, 150 frames) or all (default)")
     es.add_argument("--methods", default="sgds,pf", help="comma list of sgds,pf (default both)")
     es.add_argument("--seed", type=int, default=0, help="test k simulates scenario seed SEED+k (default 0)")
+    es.add_argument("--tracker-snr", type=float, default=None,
+                    help="give every tracker this snr preset (default: the condition's SNR, as in the paper)")
     es.add_argument("--workers", type=int, default=None, help="parallel processes (default: the core count)")
     es.add_argument("--out-dir", default="suite-results", help="where the table, JSON, figures and runs go")
     es.add_argument("--no-progress", action="store_true", help="no progress bar")

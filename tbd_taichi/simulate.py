@@ -112,7 +112,7 @@ def target_trajectory(rng, shape, n_frames, intensity, speed, q1, q2, motion, ma
         else:
             states = ncv_trajectory(rng, _start_transit(rng, shape, speed, intensity), n_frames, q1, q2)
             visible = _in_view(states, shape, 0.0)
-            if visible.sum() >= min(5, n_frames):
+            if visible.sum() >= min(5, max(n_frames - 4, 0)):  # entering can take 4 frames
                 return states, visible
     raise ParameterError(f"could not keep a target in a {shape[0]}x{shape[1]} image for {n_frames} frames "
                          f"after {MAX_TRIES} tries; use a smaller speed, fewer frames or motion='transit'")

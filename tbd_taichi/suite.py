@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
+from .bench import machine_description
 from .progress import progress_bar
 
 SNRS = (1.2, 1.4, 1.6, 1.8, 2.0)
@@ -40,15 +41,18 @@ class Run:
     snr: float
     test: int
     seed: int
+    preset_snr: float = 0.0  # the trackers' snr parameter; 0: the condition's SNR
 
     @property
     def key(self) -> str:
-        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}"
+        preset = f"/preset{self.preset_snr:g}" if self.preset_snr else ""
+        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}"
 
 
-def plan(snrs=SNRS, sizes=SIZES, methods=METHODS, tests: int = 100, seed: int = 0) -> list[Run]:
-    """Every run of the suite; test k uses scenario seed ``seed + k``."""
-    return [Run(m, side, frames, float(snr), k, seed + k) for side, frames in sizes for snr in snrs
+def plan(snrs=SNRS, sizes=SIZES, methods=METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0) -> list[Run]:
+    """Every run of the suite; test k uses scenario seed ``seed + k``.  ``preset_snr`` > 0 gives
+    every tracker that ``snr`` (Table 2 / Table 3 column) instead of the condition's SNR."""
+    return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr)) for side, frames in sizes for snr in snrs
             for k in range(tests) for m in methods]
 
 
@@ -68,14 +72,15 @@ def run_one(run: Run) -> dict:
     from .simulate import simulate
 
     scene = simulate((run.side, run.side), frames=run.frames, snr=run.snr, seed=run.seed)
-    warm_up = (run.method, run.side, run.snr)
+    preset = run.preset_snr or run.snr
+    warm_up = (run.method, run.side, preset)
     if warm_up not in _WARM:  # compile this configuration's kernels outside the timing
-        warm = make_tracker(run.method, (run.side, run.side), snr=run.snr, seed=run.seed)
+        warm = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed)
         for frame in scene.frames[:12]:
             warm.update(frame)
         del warm
         _WARM.add(warm_up)
-    tracker = make_tracker(run.method, (run.side, run.side), snr=run.snr, seed=run.seed)
+    tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed)
     t0 = time.perf_counter()
     for frame in scene.frames:
         tracker.update(frame)
@@ -83,13 +88,23 @@ def run_one(run: Run) -> dict:
     ms = (time.perf_counter() - t0) / run.frames * 1e3
     scores = metrics.evaluate(tracks, scene.truth, n_frames=run.frames)
     return dict(asdict(run), key=run.key, dsr=scores["dsr"], edt=edt_when_detected(tracks, scene.truth),
-                false_tracks=int(scores["false_tracks"]), ospa=scores["ospa"], ms_per_frame=ms)
+                false_tracks=int(scores["false_tracks"]), ospa=scores["ospa"], ms_per_frame=ms,
+                machine=machine_description())
 
 
 def _init_worker(arch: str, threads: int | None) -> None:
     from . import backend
 
     backend.init(arch, threads=threads)
+
+
+def _init_pool_worker(arch: str, threads: int | None) -> None:
+    """A pool worker ignores SIGINT: Ctrl-C reaches the whole process group, and the parent
+    alone decides to stop (it keeps the finished runs and terminates the pool)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _init_worker(arch, threads)
 
 
 def load_runs(path: Path) -> dict[str, dict]:
@@ -117,6 +132,7 @@ def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu
         task = bar.add_task("runs", total=len(runs), completed=len(runs) - len(todo)) if bar is not None else None
 
         def keep(row: dict) -> None:
+            row["workers"] = workers
             done[row["key"]] = row
             out.write(json.dumps(row) + "\n")
             out.flush()
@@ -132,12 +148,17 @@ def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu
                 import multiprocessing
 
                 ctx = multiprocessing.get_context("spawn")  # each worker starts its own Taichi runtime
-                with ctx.Pool(workers, initializer=_init_worker, initargs=(arch, threads or 1)) as pool:
+                with ctx.Pool(workers, initializer=_init_pool_worker, initargs=(arch, threads or 1)) as pool:
                     for row in pool.imap_unordered(run_one, todo):
                         keep(row)
         except KeyboardInterrupt:
             completed = False
     return [done[r.key] for r in runs if r.key in done], completed
+
+
+def machine_label(result: dict) -> str:
+    """Where a run was timed: the CPU and the number of parallel workers."""
+    return f"{result.get('machine', 'unrecorded machine')}, {result.get('workers', '?')} worker(s)"
 
 
 def summarise(results: list[dict]) -> list[dict]:
@@ -147,24 +168,61 @@ def summarise(results: list[dict]) -> list[dict]:
                   key=lambda k: (k[0], k[2], METHODS.index(k[3]) if k[3] in METHODS else 9))
     for side, frames, snr, method in keys:
         sel = [r for r in results if (r["side"], r["frames"], r["snr"], r["method"]) == (side, frames, snr, method)]
+        presets = sorted({r.get("preset_snr") or r["snr"] for r in sel})
+        machines = sorted({machine_label(r) for r in sel})
         dsr = np.array([r["dsr"] for r in sel], float)
         edt = np.array([r["edt"] for r in sel if r["dsr"] > metrics.T1], float)
         edt = edt[np.isfinite(edt)]
-        rows.append(dict(side=side, frames=frames, snr=snr, method=method, n=len(sel), tsr=metrics.tsr(dsr),
+        rows.append(dict(side=side, frames=frames, snr=snr, method=method, preset=presets, machines=machines,
+                         n=len(sel), tsr=metrics.tsr(dsr),
                          edt=float(edt.mean()) if edt.size else float("nan"), dsr=float(np.nanmean(dsr)),
                          false_tracks=float(np.mean([r["false_tracks"] for r in sel])),
                          ms_per_frame=float(np.median([r["ms_per_frame"] for r in sel]))))
     return rows
 
 
+def configured_particles(method: str, side: int, preset: float) -> int:
+    """Particles the tracker is configured with: the original PF's Table 3 count, or SGDS-PF's
+    searching particles N_sump × blocks (Table 2; each potential target adds N_tpf)."""
+    from .params import SGDSParams
+    from .pf import table3_particles
+    from .saliency import block_grid
+
+    if method == "pf":
+        return table3_particles((side, side), preset)
+    p = SGDSParams.for_snr(preset)
+    return p.N_sump * block_grid((side, side), p.L_ib).n_blocks
+
+
 def markdown_table(rows: list[dict]) -> str:
-    lines = ["| size | SNR | method | tests | TSR | mean EDT (px) | mean DSR | false tracks / seq | ms/frame |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|"]
+    """The summary table; where runs come from more than one machine, a last column numbers the
+    machine behind each row's ms/frame (see :func:`machine_list`)."""
+    machines = all_machines(rows)
+    several = len(machines) > 1
+    lines = ["| size | SNR | method | tracker snr | particles | tests | TSR | mean EDT (px) | mean DSR "
+             "| false tracks / seq | ms/frame |" + (" machine |" if several else ""),
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---|" if several else "")]
     for r in rows:
+        presets = r.get("preset") or [r["snr"]]
+        particles = "/".join(f"{configured_particles(r['method'], r['side'], v):,}" for v in presets)
         lines.append(f"| {r['side']}×{r['side']}×{r['frames']} | {r['snr']:g} | {METHOD_NAMES.get(r['method'], r['method'])} "
+                     f"| {'/'.join(f'{v:g}' for v in presets)} | {particles} "
                      f"| {r['n']} | {r['tsr']:.2f} | {r['edt']:.2f} | {r['dsr']:.2f} | {r['false_tracks']:.2f} "
-                     f"| {r['ms_per_frame']:.1f} |")
+                     f"| {r['ms_per_frame']:.1f} |"
+                     + (f" {', '.join(str(machines.index(m) + 1) for m in r.get('machines', []))} |" if several else ""))
     return "\n".join(lines)
+
+
+def all_machines(rows: list[dict]) -> list[str]:
+    return sorted({m for r in rows for m in r.get("machines", [])})
+
+
+def machine_list(rows: list[dict]) -> str:
+    """"Runs made on: …", numbered when there is more than one machine."""
+    machines = all_machines(rows)
+    if len(machines) <= 1:
+        return "Runs made on: " + (machines[0] if machines else "no machine") + "."
+    return "Runs made on: " + "; ".join(f"({k}) {m}" for k, m in enumerate(machines, 1)) + "."
 
 
 def plot_figures(rows: list[dict], out_dir: Path) -> list[Path]:
@@ -214,6 +272,7 @@ def write_report(results: list[dict], out_dir: Path, command: str, completed: bo
         "TSR: Eq. 49 with T0 = 2 px, T1 = 0.2. Mean EDT: Eq. 47 over frames detected within T0, runs with "
         "DSR > T1. False tracks: confirmed tracks whose points mostly lie ≥ 2 px from the target. ms/frame: median "
         "over runs of the tracker's update+finish time, one thread per worker.", "",
+        machine_list(rows), "",
         markdown_table(rows), "",
         *[f"![{p.stem}]({p.name})" for p in figures], ""])
     path = out_dir / "suite.md"

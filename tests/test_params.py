@@ -6,8 +6,8 @@ from tbd_taichi.params import SGDSParams, snr_band
 
 
 @pytest.mark.parametrize("snr,band,l_ib,n_sump,t_pe,t_ptp,t_ft,t_rt", [
-    (3.0, 0, 256, 4000, 0.1, 5, 0.7, 9), (2.0, 0, 256, 4000, 0.1, 5, 0.7, 9), (1.9, 1, 256, 4000, 0.1, 5, 0.5, 9),
-    (1.6, 2, 200, 4000, 0.1, 5, 0.5, 8), (1.4, 3, 150, 8000, 0.2, 4, 0.2, 6), (1.2, 4, 100, 8000, 0.2, 4, 0.11, 5)])
+    (3.0, 0, 256, 4000, 0.1, 5, 0.7, 9), (2.0, 0, 256, 4000, 0.1, 5, 0.7, 9), (1.9, 1, 200, 6000, 0.1, 5, 0.5, 9),
+    (1.6, 2, 150, 6000, 0.1, 5, 0.5, 8), (1.4, 3, 150, 8000, 0.2, 4, 0.2, 6), (1.2, 4, 100, 8000, 0.2, 4, 0.11, 5)])
 def test_table2_presets_lie_in_the_papers_ranges(snr, band, l_ib, n_sump, t_pe, t_ptp, t_ft, t_rt):
     p = SGDSParams.for_snr(snr)
     assert snr_band(snr) == band

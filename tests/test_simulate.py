@@ -82,6 +82,17 @@ def test_transit_targets_enter_and_leave():
     assert per_target.min() >= 5 and per_target.max() < 120
 
 
+@pytest.mark.parametrize("frames", [1, 2, 4, 9])
+def test_short_transit_sequences(frames):
+    """A few frames (e.g. ``tbd-taichi bench --frames 1`` plus 3 warm-up frames) still simulate:
+    a target entering from outside may need up to 4 frames to come into view, so only
+    sequences longer than 4 frames must show it (5 frames from 9 on)."""
+    scene = simulate((512, 512), frames, snr=2.0, seed=3, motion="transit")
+    assert scene.frames.shape == (frames, 512, 512)
+    assert len(scene.truth) >= min(5, max(frames - 4, 0))
+    assert np.all((scene.truth["x"] >= -0.5) & (scene.truth["x"] < 511.5))
+
+
 def test_same_seed_same_scenario():
     a, b = simulate((30, 40), 10, 2.0, seed=7), simulate((30, 40), 10, 2.0, seed=7)
     np.testing.assert_array_equal(a.frames, b.frames)

@@ -49,8 +49,24 @@ def test_execute_keeps_finished_runs_and_resumes(tmp_path, monkeypatch):
     assert [r["dsr"] for r in results] == [0.9, 0.9, 0.3, 0.3]  # the first two were not rerun
     assert len(path.read_text().splitlines()) == 4
     report = suite.write_report(results, tmp_path, "cmd", True, 4)
-    assert "| 50×50×70 | 1.4 | SGDS-PF | 2 | 1.00 |" in report.read_text()
+    text = report.read_text()
+    assert "| 50×50×70 | 1.4 | SGDS-PF | 1.4 | 8,000 | 2 | 1.00 |" in text  # Table 2: 8,000 searching particles
+    assert "Runs made on: unrecorded machine" in text
     assert (tmp_path / "suite_50x50.png").stat().st_size > 5000
+
+
+def test_tracker_snr_preset_is_its_own_condition():
+    """--tracker-snr runs are keyed apart from the paper's matched presets (so both can share a
+    results file) and the table names the preset and its particle numbers (Tables 2 and 3)."""
+    matched = suite.plan(snrs=(1.8,), sizes=((200, 150),), tests=1)
+    fixed = suite.plan(snrs=(1.8,), sizes=((200, 150),), tests=1, preset_snr=1.4)
+    assert not {r.key for r in matched} & {r.key for r in fixed}
+    rows = suite.summarise([fake(r, 0.9) for r in matched + fixed])
+    assert [r["preset"] for r in rows] == [[1.4, 1.8], [1.4, 1.8]]
+    table = suite.markdown_table(suite.summarise([fake(r, 0.9) for r in fixed]))
+    assert "| SGDS-PF | 1.4 | 32,000 |" in table and "| original PF | 1.4 | 30,000 |" in table
+    assert suite.configured_particles("pf", 200, 1.8) == 20_000
+    assert suite.configured_particles("sgds", 200, 1.8) == 6_000  # one 200-px block
 
 
 def test_one_real_run_scores_the_tracker():
@@ -67,5 +83,9 @@ def test_cli_evaluate_suite(tmp_path, capsys):
     (row,) = summary["rows"]
     assert row["method"] == "pf" and row["n"] == 1 and np.isfinite(row["ms_per_frame"])
     assert "evaluate-suite" in summary["command"]
+    (stored,) = [json.loads(line) for line in (out / "suite_runs.jsonl").read_text().splitlines()]
+    assert "CPUs" in stored["machine"] and stored["workers"] == 1
     assert cli.main(["evaluate-suite", "--methods", "kalman", "--out-dir", str(out)]) == 2
     assert "--methods" in capsys.readouterr().err
+    assert cli.main(["evaluate-suite", "--tracker-snr", "0", "--out-dir", str(out)]) == 2
+    assert "--tracker-snr" in capsys.readouterr().err
