@@ -118,14 +118,15 @@ class ParticleKernels:
                     self.born[i] = 2
 
     @ti.func
-    def copy_particle(self, b: ti.i32, i: ti.i32, j: ti.i32):
-        self.x[b, i] = self.x[b, j]
-        self.vx[b, i] = self.vx[b, j]
-        self.y[b, i] = self.y[b, j]
-        self.vy[b, i] = self.vy[b, j]
-        self.inten[b, i] = self.inten[b, j]
-        self.tp[b, i] = self.tp[b, j]
-        self.seq[b, i] = self.seq[b, j]
+    def copy_state(self, src: ti.i32, j: ti.i32, dst: ti.i32, i: ti.i32):
+        """Slot i of buffer dst takes x, vx, y, vy, I, Tp and Seq of slot j in buffer src (E is left to the caller)."""
+        self.x[dst, i] = self.x[src, j]
+        self.vx[dst, i] = self.vx[src, j]
+        self.y[dst, i] = self.y[src, j]
+        self.vy[dst, i] = self.vy[src, j]
+        self.inten[dst, i] = self.inten[src, j]
+        self.tp[dst, i] = self.tp[src, j]
+        self.seq[dst, i] = self.seq[src, j]
 
     @ti.kernel
     def draw_newborn(self, seed: ti.u32, frame: ti.i32, b: ti.i32, width: ti.i32):
@@ -155,7 +156,7 @@ class ParticleKernels:
                         if found < 0 and self.e[b, j] == 1 and self.born[j] == 0:
                             found = j
                     if found >= 0:
-                        self.copy_particle(b, i, found)
+                        self.copy_state(b, found, b, i)
                         self.e[b, i] = 1
                     else:
                         self.e[b, i] = 0
@@ -401,14 +402,8 @@ class ParticleKernels:
             g = self.slot_group[i]
             if g >= 0 and i - self.off[g] < self.n_out[g] and self.n[g] > 0:
                 p = self.parent[i]
-                self.x[dst, i] = self.x[src, p]
-                self.vx[dst, i] = self.vx[src, p]
-                self.y[dst, i] = self.y[src, p]
-                self.vy[dst, i] = self.vy[src, p]
-                self.inten[dst, i] = self.inten[src, p]
+                self.copy_state(src, p, dst, i)
                 self.e[dst, i] = self.e[src, p]
-                self.tp[dst, i] = self.tp[src, p]
-                self.seq[dst, i] = self.seq[src, p]
                 self.logw[i] = 0.0
 
     # ------------------------------------------------------------ Eq. 19 and spreads

@@ -21,6 +21,7 @@ after the engine's run (it includes everything measured before it in the same pr
 """
 from __future__ import annotations
 
+import functools
 import os
 import platform
 import time
@@ -110,6 +111,7 @@ def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0
             "fps": 1e3 / update_ms, "peak_rss_mib": peak_rss_mib()}
 
 
+@functools.lru_cache(maxsize=1)
 def machine_description() -> str:
     """The CPU model and logical CPU count, e.g. "Intel(R) Xeon(R) Processor, 16 CPUs"."""
     model = platform.processor() or platform.machine()
