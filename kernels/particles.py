@@ -18,6 +18,7 @@ import taichi as ti
 from .rng import key_prefix, normal_pair, uniform_at, uniform_f64_at
 
 TILE = 1024
+PAD = 4  # zero border of the weights' frame: a 5×5 window (Eq. 15) that touches the image stays inside it
 NEG_INF = -3.0e38
 TWO_PI = 2.0 * math.pi
 
@@ -26,11 +27,27 @@ S_EXIST, S_BIRTH_X, S_BIRTH_Y, S_BIRTH_SPEED, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_
 S_BIRTH_MU, S_COPY = 20, 21
 COPY_TRIES = 16  # draws of a random slot to find an E = 1 particle to copy
 S_NOISE_XY, S_NOISE_V, S_NOISE_I, S_RESAMPLE = range(8, 12)
+S_RESAMPLE_END = 22
 
 # per-group sums of ``moments`` (f64)
 M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
 N_MOMENTS = 13
 STATE = ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")
+
+
+@ti.func
+def psf_samples(d0: ti.f32, inv2s2: ti.f32, step: ti.f32, p0: ti.i32, size: ti.i32):
+    """Eq. 14 along one axis: g_k = exp(−(d0 + k)²/(2Σ²)) for k = 0…4 (0 where pixel p0 + k is outside
+    [0, size)), from g_0 and the ratio r_k = g_{k+1}/g_k = exp(−(2(d0 + k) + 1)/(2Σ²)) = r_0·step^k,
+    step = exp(−2/(2Σ²)): two exponentials instead of five, a few f32 ulps apart."""
+    g = ti.Vector([0.0] * 5, dt=ti.f32)
+    gk = ti.exp(-d0 * d0 * inv2s2)
+    r = ti.exp(-(ti.f32(2.0) * d0 + ti.f32(1.0)) * inv2s2)
+    for k in ti.static(range(5)):
+        g[k] = gk if 0 <= p0 + k < size else ti.f32(0.0)
+        gk *= r
+        r *= step
+    return g
 
 
 @ti.data_oriented
@@ -45,21 +62,22 @@ class ParticleKernels:
         f64 = lambda *shape: ti.field(ti.f64, shape=shape)  # noqa: E731
         self.x, self.vx, self.y, self.vy, self.inten = f32(2, c), f32(2, c), f32(2, c), f32(2, c), f32(2, c)
         self.e, self.tp, self.seq = i32(2, c), i32(2, c), i32(2, c)
-        self.logw, self.born, self.parent, self.cum = f32(c), i32(c), i32(c), f64(c)
+        self.logw, self.born, self.parent, self.cum, self.spc = f32(c), i32(c), i32(c), f64(c), f64(c)
         self.slot_group = i32(c)
         self.off, self.cap, self.n, self.n_out, self.kind = i32(g), i32(g), i32(g), i32(g), i32(g)
         self.pb, self.pd, self.mu = f32(g), f32(g), f32(g)
         self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
         self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
         self.gmax, self.gmax_e, self.gtotal, self.u0 = f32(g), f32(g), f64(g), f64(g)
-        self.gt0, self.gt1 = i32(g), i32(g)
+        self.gt0, self.gt1, self.gspc = i32(g), i32(g), f64(g)
         self.tile_start, self.tile_group = i32(n_tiles), i32(n_tiles)
         self.tile_max, self.tile_max_e, self.tile_total, self.tile_prefix = f32(n_tiles), f32(n_tiles), \
             f64(n_tiles), f64(n_tiles)
+        self.tile_spc, self.tile_spc_prefix = f64(n_tiles), f64(n_tiles)
         self.tile_moments, self.moments = f64(n_tiles, N_MOMENTS), f64(g, N_MOMENTS)
         self.map_pixel, self.map_cdf = i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
-        self.z = f32(*frame_shape)
+        self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.label = i32(*frame_shape)
 
     # ------------------------------------------------------------ helpers
@@ -219,11 +237,13 @@ class ParticleKernels:
         """Step 3, Eq. 15 in the log domain: for E = 1,
         log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
         over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
-        The Gaussian is separable, so h = a·gx·gy and Σh² = a²·Σgx²·Σgy²."""
-        h, w = self.z.shape[0], self.z.shape[1]
+        The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five samples
+        come from two exponentials by the ratio recurrence of ``psf_samples``."""
+        h, w = self.z.shape[0] - 2 * PAD, self.z.shape[1] - 2 * PAD
         inv2s2 = ti.f32(1.0) / (ti.f32(2.0) * psf_sigma * psf_sigma)
         norm = ti.f32(1.0) / (ti.f32(TWO_PI) * psf_sigma * psf_sigma)
         inv_var = ti.f32(1.0) / (noise_sigma * noise_sigma)
+        step = ti.exp(ti.f32(-2.0) * inv2s2)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i):
@@ -232,19 +252,18 @@ class ParticleKernels:
                     x, y = self.x[b, i], self.y[b, i]
                     cx = ti.cast(ti.floor(x + 0.5), ti.i32)
                     cy = ti.cast(ti.floor(y + 0.5), ti.i32)
-                    gx = ti.Vector([0.0] * 5, dt=ti.f32)
-                    gy = ti.Vector([0.0] * 5, dt=ti.f32)
-                    for k in ti.static(range(5)):
-                        px, py = cx + k - 2, cy + k - 2
-                        dx, dy = ti.cast(px, ti.f32) - x, ti.cast(py, ti.f32) - y
-                        gx[k] = ti.exp(-dx * dx * inv2s2) if 0 <= px < w else ti.f32(0.0)
-                        gy[k] = ti.exp(-dy * dy * inv2s2) if 0 <= py < h else ti.f32(0.0)
+                    gx = psf_samples(ti.cast(cx - 2, ti.f32) - x, inv2s2, step, cx - 2, w)
+                    gy = psf_samples(ti.cast(cy - 2, ti.f32) - y, inv2s2, step, cy - 2, h)
+                    # first window row/column in the padded frame; outside pixels read the zero
+                    # border (and their g is 0), so the sum needs no branches.  A window that
+                    # misses the image (g all 0) is clamped to one that does not overflow.
+                    r0 = ti.min(ti.max(cy, -2), h + 1) + PAD - 2
+                    c0 = ti.min(ti.max(cx, -2), w + 1) + PAD - 2
                     sz = ti.f32(0.0)
                     for j in ti.static(range(5)):
                         row = ti.f32(0.0)
                         for k in ti.static(range(5)):
-                            if gy[j] > 0 and gx[k] > 0:
-                                row += gx[k] * self.z[cy + j - 2, cx + k - 2]
+                            row += gx[k] * self.z[r0 + j, c0 + k]
                         sz += gy[j] * row
                     a = self.inten[b, i] * norm
                     lw = (a * sz - ti.f32(0.5) * a * a * gx.dot(gx) * gy.dot(gy)) * inv_var
@@ -301,45 +320,81 @@ class ParticleKernels:
             self.gtotal[g] = s
 
     @ti.func
-    def find_parent(self, g: ti.i32, v: ti.f64) -> ti.i32:
-        """The slot whose cumulative-weight interval holds v (Eq. 18): tile by its prefix, then slot."""
-        lo, hi = self.gt0[g], self.gt1[g] - 1
-        while lo < hi:  # last tile with prefix ≤ v
-            mid = (lo + hi + 1) // 2
-            if self.tile_prefix[mid] <= v:
-                lo = mid
+    def out_tile_end(self, t: ti.i32) -> ti.i32:
+        """End of tile t's output slots (the first n_out of its group's slab)."""
+        g = self.tile_group[t]
+        return ti.min(self.tile_start[t] + TILE, self.off[g] + self.n_out[g])
+
+    @ti.func
+    def upper_edge(self, g: ti.i32, p: ti.i32) -> ti.f64:
+        """Eq. 17: Σ_{j ≤ p} w_j of group g (unnormalised, f64) = the tile's prefix + the in-tile sum."""
+        return self.tile_prefix[self.gt0[g] + (p - self.off[g]) // TILE] + self.cum[p]
+
+    @ti.func
+    def first_slot_above(self, g: ti.i32, v: ti.f64) -> ti.i32:
+        """Eq. 18: the first live slot of group g whose upper edge exceeds v (the last one if none)."""
+        lo, hi = self.off[g], self.off[g] + self.n[g] - 1
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.upper_edge(g, mid) > v:
+                hi = mid
             else:
-                hi = mid - 1
-        t = lo
-        while t > self.gt0[g] and self.tile_start[t] >= self.tile_end(t):  # skip empty trailing tiles
-            t -= 1
-        r = v - self.tile_prefix[t]
-        a, z = self.tile_start[t], self.tile_end(t) - 1
-        while a < z:  # first slot with cum > r
-            mid = (a + z) // 2
-            if self.cum[mid] > r:
-                z = mid
-            else:
-                a = mid + 1
-        return a
+                lo = mid + 1
+        return lo
 
     @ti.kernel
-    def draw_parents(self, seed: ti.u32, frame: ti.i32, systematic: ti.i32):
-        """Eq. 18: for output slot m < n_out_g of group g, the parent holding u·Σw.
-        Multinomial: u_m i.i.d. U(0, 1) (53-bit); systematic: u_m = (m + u0_g)/n_out_g."""
+    def tile_spacings(self, seed: ti.u32, frame: ti.i32):
+        """Multinomial resampling, part 1: exponential spacings −log u (f64) over each group's output
+        slots, summed within tiles (spc), with the tile totals."""
         key = key_prefix(seed, frame, S_RESAMPLE)
         ti.loop_config(serialize=self.serial)
-        for i in range(self.capacity):
-            g = self.slot_group[i]
-            if g >= 0:
-                m = i - self.off[g]
-                if m < self.n_out[g] and self.n[g] > 0:
+        for t in range(self.tile_start.shape[0]):
+            g = self.tile_group[t]
+            s = ti.cast(0.0, ti.f64)
+            if self.n[g] > 0:
+                for i in range(self.tile_start[t], self.out_tile_end(t)):
+                    s -= ti.log(uniform_f64_at(key, i))
+                    self.spc[i] = s
+            self.tile_spc[t] = s
+
+    @ti.kernel
+    def group_spacings(self, seed: ti.u32, frame: ti.i32):
+        """Multinomial resampling, part 2: exclusive tile prefixes of the spacings and each group's
+        total, which includes one more spacing (the (n_out + 1)-th, keyed on the group)."""
+        key = key_prefix(seed, frame, S_RESAMPLE_END)
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            s = ti.cast(0.0, ti.f64)
+            for t in range(self.gt0[g], self.gt1[g]):
+                self.tile_spc_prefix[t] = s
+                s += self.tile_spc[t]
+            self.gspc[g] = s - ti.log(uniform_f64_at(key, g))
+
+    @ti.kernel
+    def draw_parents(self, systematic: ti.i32):
+        """Eq. 18 for sorted positions: output slot m < n_out_g of group g takes the parent whose
+        cumulative-weight interval holds u_m·Σw.  Multinomial: u_m = S_m / S_{n_out+1}, S the running
+        sum of exponential spacings, which are the order statistics of n_out i.i.d. U(0, 1) (the
+        paper's independent uniforms, sorted); systematic: u_m = (m + u0_g)/n_out_g.  Sorted u lets
+        each tile binary-search its first parent and walk forward from there."""
+        ti.loop_config(serialize=self.serial)
+        for t in range(self.tile_start.shape[0]):
+            g = self.tile_group[t]
+            if self.n[g] > 0 and self.tile_start[t] < self.out_tile_end(t):
+                last = self.off[g] + self.n[g] - 1
+                p = -1
+                for i in range(self.tile_start[t], self.out_tile_end(t)):
                     u = ti.cast(0.0, ti.f64)
                     if systematic:
-                        u = (ti.cast(m, ti.f64) + self.u0[g]) / ti.cast(self.n_out[g], ti.f64)
+                        u = (ti.cast(i - self.off[g], ti.f64) + self.u0[g]) / ti.cast(self.n_out[g], ti.f64)
                     else:
-                        u = uniform_f64_at(key, i)
-                    self.parent[i] = self.find_parent(g, u * self.gtotal[g])
+                        u = (self.tile_spc_prefix[t] + self.spc[i]) / self.gspc[g]
+                    v = u * self.gtotal[g]
+                    if p < 0:
+                        p = self.first_slot_above(g, v)
+                    while p < last and self.upper_edge(g, p) <= v:
+                        p += 1
+                    self.parent[i] = p
 
     @ti.kernel
     def set_counts(self, which: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
@@ -378,6 +433,27 @@ class ParticleKernels:
             self.seq[b, i] = seq[k]
 
     @ti.kernel
+    def read_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                   x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                   y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                   inten: ti.types.ndarray(dtype=ti.f32, ndim=1), e: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                   tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                   logw: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        """The states of ``slots`` in buffer b (and their log-weights) to the host, in one launch."""
+        ti.loop_config(serialize=self.serial)
+        for k in range(slots.shape[0]):
+            i = slots[k]
+            x[k] = self.x[b, i]
+            vx[k] = self.vx[b, i]
+            y[k] = self.y[b, i]
+            vy[k] = self.vy[b, i]
+            inten[k] = self.inten[b, i]
+            e[k] = self.e[b, i]
+            tp[k] = self.tp[b, i]
+            seq[k] = self.seq[b, i]
+            logw[k] = self.logw[i]
+
+    @ti.kernel
     def load_labels(self, labels: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         """The PP label image that newborns drawn from a proposal map take their Seq from (Eq. 36)."""
         ti.loop_config(serialize=self.serial)
@@ -391,7 +467,7 @@ class ParticleKernels:
         ti.loop_config(serialize=self.serial)
         for y in range(z.shape[0]):
             for x in range(z.shape[1]):
-                self.z[y, x] = z[y, x]
+                self.z[y + PAD, x + PAD] = z[y, x]
 
     @ti.kernel
     def gather(self, src: ti.i32):

@@ -16,8 +16,10 @@ One filter step (:meth:`ParticlePool.step`), for every group at once:
    motion model matches the scenario it is tested on);
 3. log importance weights, Eq. 15 (5×5 window, PSF of Eq. 14, Σ and σ parameters);
 4. segmented normalisation, Eq. 16 (per-group log-sum-exp, cumulative sums in f64);
-5. segmented resampling, Eqs. 17–18: multinomial (the paper's L independent uniforms)
-   or systematic; a group's output count may differ from its input count;
+5. segmented resampling, Eqs. 17–18: multinomial (the paper's L independent uniforms,
+   drawn in sorted order as normalised sums of exponential spacings, so parents are found
+   by a forward walk) or systematic; a group's output count may differ from its input
+   count, and offspring sit in parent order;
 6. estimates per group (:meth:`ParticlePool.estimates`): Eq. 19 (mean over E = 1
    particles), the existence probability ΣE/n, mean Tp and the positional covariance.
 """
@@ -33,6 +35,8 @@ from .errors import ParameterError
 ENGINES = ("taichi", "numpy")
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
+STATE_DTYPES = tuple((name, np.float32) for name in ("x", "vx", "y", "vy", "inten")) + \
+    tuple((name, np.int32) for name in ("e", "tp", "seq")) + (("logw", np.float32),)
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 
 
@@ -222,9 +226,13 @@ class ParticlePool:
 
     def state(self) -> dict:
         """Live particles of the current buffer: arrays x, vx, y, vy, inten, e, tp, seq, group, slot, logw."""
-        slots = np.concatenate([self.off[g] + np.arange(self.counts[g]) for g in range(self.n_groups)]).astype(np.int64)
-        out = {name: self._get(name)[self.buf][slots] for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
-        out.update(group=np.repeat(np.arange(self.n_groups), self.counts), slot=slots, logw=self._get("logw")[slots])
+        group = np.repeat(np.arange(self.n_groups), self.counts)
+        slots = (np.arange(len(group)) - np.repeat(np.cumsum(self.counts) - self.counts, self.counts)
+                 + self.off[group]).astype(np.int32)
+        out = {name: np.empty(len(slots), dtype) for name, dtype in STATE_DTYPES}
+        if len(slots):
+            self.k.read_slots(self.buf, slots, *out.values())
+        out.update(group=group, slot=slots.astype(np.int64))
         return out
 
     def set_state(self, group_states: dict) -> None:
@@ -266,8 +274,12 @@ class ParticlePool:
 
     def weigh(self) -> None:
         """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
+        self.k.log_weights(self.buf, self.psf_sigma, self.noise_sigma)
+        self.normalise()
+
+    def normalise(self) -> None:
+        """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
         k = self.k
-        k.log_weights(self.buf, self.psf_sigma, self.noise_sigma)
         k.tile_maxima(self.buf)
         k.group_maxima()
         k.tile_cumulative()
@@ -283,7 +295,10 @@ class ParticlePool:
             from .numpy_kernels import rng
 
             self._put("u0", rng.uniform_f64(self.seed, frame, 99, np.arange(self.n_groups)))
-        self.k.draw_parents(self.seed, frame, int(systematic))
+        else:
+            self.k.tile_spacings(self.seed, frame)
+            self.k.group_spacings(self.seed, frame)
+        self.k.draw_parents(int(systematic))
         self.k.gather(self.buf)
         self.k.commit_counts()
         self.buf = 1 - self.buf

@@ -144,6 +144,16 @@ def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_bloc
     return take
 
 
+def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """Eq. 37's random elimination of ``take`` of a PP's ``size`` particles, spread evenly over its
+    resampled order: the particle of rank r goes iff ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋,
+    q = ⌊phase·size⌋ (phase ~ U(0, 1) per PP).  Exactly ``take`` go, each with probability take/size.
+    Resampled particles sit next to their siblings (sorted parents), so a contiguous subset would
+    remove whole families."""
+    q = np.minimum((phase * size).astype(np.int64), size - 1)
+    return ((rank + 1) * take + q) // size > (rank * take + q) // size
+
+
 def rank_in_population(inverse: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """0-based position of each particle among its PP's particles, in slot order."""
     order = stable_order(inverse)
@@ -312,7 +322,9 @@ class SGDSPF:
         st = pool.state()
         pp_block, inverse, counts = populations(st["group"], st["seq"])
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
-        keep = rank_in_population(inverse, counts) >= take[inverse]  # resampled order is random: Eq. 37's random subset
+        rng = np.random.default_rng([self.seed, f])
+        keep = ~spread_removal(rank_in_population(inverse, counts), counts[inverse], take[inverse],
+                               rng.random(len(counts))[inverse])
         e = (st["e"] == 1) & keep
         n_pp = np.bincount(inverse, weights=keep, minlength=len(counts))
         ne = np.bincount(inverse, weights=e, minlength=len(counts))
@@ -329,7 +341,7 @@ class SGDSPF:
             elif len(handed) < len(self.free_groups):
                 keep[members] = False
                 handed.append(members)
-        self._start_tracks(f, st, handed, np.random.default_rng([self.seed, f]))
+        self._start_tracks(f, st, handed, rng)
         self._update_index_image(st, keep, counts[inverse])
         bounds = np.searchsorted(st["group"][keep], np.arange(1, self.grid.n_blocks))
         kept = {name: np.split(st[name][keep], bounds) for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}

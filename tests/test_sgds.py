@@ -7,7 +7,7 @@ import pytest
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.errors import InputError
-from tbd_taichi.sgds import SGDSPF, icef, resize_population, scef, update_confidence
+from tbd_taichi.sgds import SGDSPF, icef, resize_population, scef, spread_removal, update_confidence
 
 
 def run(shape, frames, snr, seed, engine="taichi"):
@@ -38,6 +38,23 @@ def test_confidence_eq43():
     assert update_confidence(0.8, 1.0, 1.1) == pytest.approx(0.88)
     assert update_confidence(0.95, 1.0, 1.1) == 1.0
     assert update_confidence(1.0, 0.9, 1.0) == pytest.approx(0.9)
+
+
+def test_spread_removal_eq37():
+    """Exactly ``take`` of each PP go, each particle with probability take/size over random phases,
+    and not as one contiguous run (resampled siblings sit together)."""
+    size, take = 40, 10
+    rank = np.arange(size)
+    hits = np.zeros(size)
+    rng = np.random.default_rng(0)
+    for phase in rng.random(4000):
+        gone = spread_removal(rank, np.full(size, size), np.full(size, take), np.full(size, phase))
+        assert gone.sum() == take
+        assert np.diff(np.flatnonzero(gone)).min() == size // take  # evenly spread
+        hits += gone
+    np.testing.assert_allclose(hits / 4000, take / size, atol=4 * np.sqrt(0.25 * 0.75 / 4000))
+    assert not spread_removal(rank, np.full(size, size), np.zeros(size, np.int64), np.full(size, 0.7)).any()
+    assert spread_removal(rank, np.full(size, size), np.full(size, size), np.full(size, 0.999)).all()
 
 
 def test_resize_population():

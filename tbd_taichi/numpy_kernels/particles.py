@@ -10,10 +10,22 @@ import numpy as np
 
 from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
                                   S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, S_NOISE_I,
-                                  S_NOISE_V, S_NOISE_XY, S_RESAMPLE, TILE, TWO_PI)
+                                  S_NOISE_V, S_NOISE_XY, S_RESAMPLE, S_RESAMPLE_END, TILE, TWO_PI)
 from . import rng
 
 F32 = np.float32
+
+
+def psf_samples(d0: np.ndarray, inv2s2, step, pixels: np.ndarray, size: int) -> np.ndarray:
+    """Twin of the kernels' ``psf_samples``: (n, 5) Gaussian samples by the same ratio recurrence."""
+    g = np.empty((len(d0), 5), F32)
+    gk = np.exp(-d0 * d0 * inv2s2)
+    r = np.exp(-(F32(2.0) * d0 + F32(1.0)) * inv2s2)
+    for k in range(5):
+        g[:, k] = gk
+        gk = gk * r
+        r = r * step
+    return np.where((pixels >= 0) & (pixels < size), g, F32(0))
 
 
 class NumpyParticleKernels:
@@ -26,17 +38,18 @@ class NumpyParticleKernels:
             setattr(self, name, np.zeros((2, c), F32))
         for name in ("e", "tp", "seq"):
             setattr(self, name, np.zeros((2, c), np.int32))
-        self.logw, self.born, self.parent, self.cum = np.zeros(c, F32), np.zeros(c, np.int32), \
-            np.zeros(c, np.int32), np.zeros(c)
+        self.logw, self.born, self.parent, self.cum, self.spc = np.zeros(c, F32), np.zeros(c, np.int32), \
+            np.zeros(c, np.int32), np.zeros(c), np.zeros(c)
         self.slot_group = np.full(c, -1, np.int32)
         for name in ("off", "cap", "n", "n_out", "kind", "gt0", "gt1", "map_off", "map_n"):
             setattr(self, name, np.zeros(g, np.int32))
         for name in ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax", "gmax", "gmax_e"):
             setattr(self, name, np.zeros(g, F32))
-        self.gtotal, self.u0, self.map_total = np.zeros(g), np.zeros(g), np.zeros(g)
+        self.gtotal, self.u0, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
         self.tile_max, self.tile_max_e = np.zeros(n_tiles, F32), np.zeros(n_tiles, F32)
         self.tile_total, self.tile_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
+        self.tile_spc, self.tile_spc_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
         self.tile_moments, self.moments = np.zeros((n_tiles, N_MOMENTS)), np.zeros((g, N_MOMENTS))
         self.map_pixel, self.map_cdf = np.zeros(map_capacity, np.int32), np.zeros(map_capacity)
         self.z = np.zeros(frame_shape, F32)
@@ -158,10 +171,9 @@ class NumpyParticleKernels:
         cy = np.floor(y + F32(0.5)).astype(np.int64)
         k = np.arange(-2, 3)
         px, py = cx[:, None] + k, cy[:, None] + k
-        dx, dy = px.astype(F32) - x[:, None], py.astype(F32) - y[:, None]
-        in_x, in_y = (px >= 0) & (px < w), (py >= 0) & (py < h)
-        gx = np.where(in_x, np.exp(-dx * dx * inv2s2), F32(0)).astype(F32)
-        gy = np.where(in_y, np.exp(-dy * dy * inv2s2), F32(0)).astype(F32)
+        step = np.exp(F32(-2.0) * inv2s2)
+        gx = psf_samples((cx - 2).astype(F32) - x, inv2s2, step, px, w)
+        gy = psf_samples((cy - 2).astype(F32) - y, inv2s2, step, py, h)
         zwin = self.z[np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]]
         use = (gy[:, :, None] > 0) & (gx[:, None, :] > 0)
         sz = np.zeros(len(i), F32)
@@ -183,12 +195,26 @@ class NumpyParticleKernels:
         for t, (s, e) in enumerate(zip(self.tile_start, self.tile_ends())):
             yield t, int(s), int(max(e, s))
 
+    def _tile_matrix(self, per_slot: np.ndarray, ends: np.ndarray, fill) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-slot values laid out as (n_tiles, TILE) rows, ``fill`` past each tile's end; with the
+        slot index and validity of every cell.  Row-wise NumPy reductions then follow the kernels'
+        serial in-tile order (a padding 0 added to a sum, or −inf to a max, changes nothing)."""
+        idx = self.tile_start[:, None] + np.arange(TILE)
+        valid = idx < ends[:, None]
+        return np.where(valid, per_slot[np.minimum(idx, self.capacity - 1)], fill), idx, valid
+
+    def _tile_cumsum(self, per_slot: np.ndarray, ends: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """In-tile running sums (f64) into ``out`` at each tile's slots; returns the tile totals."""
+        m, idx, valid = self._tile_matrix(per_slot.astype(np.float64), ends, 0.0)
+        c = np.cumsum(m, axis=1)
+        out[idx[valid]] = c[valid]
+        return c[:, -1]
+
     def tile_maxima(self, b: int) -> None:
-        for t, s, e in self._tile_slices():
-            lw = self.logw[s:e]
-            self.tile_max[t] = lw.max() if e > s else NEG_INF
-            sel = self.e[b, s:e] == 1
-            self.tile_max_e[t] = lw[sel].max() if sel.any() else NEG_INF
+        ends = self.tile_ends()
+        self.tile_max[:] = self._tile_matrix(self.logw, ends, F32(NEG_INF))[0].max(axis=1)
+        lw_e = np.where(self.e[b] == 1, self.logw, F32(NEG_INF))
+        self.tile_max_e[:] = self._tile_matrix(lw_e, ends, F32(NEG_INF))[0].max(axis=1)
 
     def group_maxima(self) -> None:
         for g in range(len(self.off)):
@@ -197,49 +223,53 @@ class NumpyParticleKernels:
             self.gmax_e[g] = max(self.tile_max_e[t].max(initial=NEG_INF), F32(NEG_INF))
 
     def tile_cumulative(self) -> None:
-        for t, s, e in self._tile_slices():
-            g = self.tile_group[t]
-            self.cum[s:e] = np.cumsum(np.exp(self.logw[s:e].astype(np.float64) - np.float64(self.gmax[g])))
-            self.tile_total[t] = self.cum[e - 1] if e > s else 0.0
+        gmax = np.zeros(self.capacity)
+        live = self.slot_group >= 0
+        gmax[live] = self.gmax[self.slot_group[live]]
+        with np.errstate(over="ignore"):  # slots past the live ones hold stale weights
+            w = np.exp(self.logw.astype(np.float64) - gmax)
+        self.tile_total[:] = self._tile_cumsum(w, self.tile_ends(), self.cum)
+
+    @staticmethod
+    def _exclusive_prefix(totals: np.ndarray, t0: int, t1: int, prefix: np.ndarray) -> float:
+        """prefix[t] = Σ_{t0 ≤ k < t} totals[k] in tile order (serial f64); returns the whole sum."""
+        s = 0.0
+        for t in range(t0, t1):
+            prefix[t] = s
+            s += totals[t]
+        return s
 
     def group_prefix(self) -> None:
         for g in range(len(self.off)):
-            s = 0.0
-            for t in range(self.gt0[g], self.gt1[g]):
-                self.tile_prefix[t] = s
-                s += self.tile_total[t]
-            self.gtotal[g] = s
+            self.gtotal[g] = self._exclusive_prefix(self.tile_total, self.gt0[g], self.gt1[g], self.tile_prefix)
 
-    def find_parent(self, g: int, v: np.ndarray) -> np.ndarray:
-        t0, t1 = self.gt0[g], self.gt1[g]
-        prefix = self.tile_prefix[t0:t1]
-        t = t0 + np.searchsorted(prefix, v, side="right") - 1
-        ends = self.tile_ends()
-        t = np.maximum(t, t0)
-        empty = self.tile_start[t] >= ends[t]
-        while empty.any():
-            t[empty & (t > t0)] -= 1
-            empty = (self.tile_start[t] >= ends[t]) & (t > t0)
-        r = v - self.tile_prefix[t]
-        out = np.empty(len(v), np.int64)
-        for tile in np.unique(t):
-            sel = t == tile
-            s, e = self.tile_start[tile], ends[tile]
-            k = np.searchsorted(self.cum[s:e], r[sel], side="right")
-            out[sel] = s + np.minimum(k, e - s - 1)
-        return out
+    def _out_tile_ends(self) -> np.ndarray:
+        g = self.tile_group
+        return np.where(self.n[g] > 0, np.minimum(self.tile_start + TILE, self.off[g] + self.n_out[g]), 0)
 
-    def draw_parents(self, seed: int, frame: int, systematic: int) -> None:
+    def tile_spacings(self, seed: int, frame: int) -> None:
+        spacing = -np.log(rng.uniform_f64(seed, frame, S_RESAMPLE, np.arange(self.capacity)))
+        self.tile_spc[:] = self._tile_cumsum(spacing, self._out_tile_ends(), self.spc)
+
+    def group_spacings(self, seed: int, frame: int) -> None:
+        end = -np.log(rng.uniform_f64(seed, frame, S_RESAMPLE_END, np.arange(len(self.off))))
         for g in range(len(self.off)):
-            m_out = int(self.n_out[g])
-            if m_out == 0 or self.n[g] == 0:
+            self.gspc[g] = self._exclusive_prefix(self.tile_spc, self.gt0[g], self.gt1[g], self.tile_spc_prefix)
+            self.gspc[g] = self.gspc[g] + end[g]
+
+    def draw_parents(self, systematic: int) -> None:
+        for g in range(len(self.off)):
+            n, m_out, off = int(self.n[g]), int(self.n_out[g]), int(self.off[g])
+            if n == 0 or m_out == 0:
                 continue
-            slots = self.off[g] + np.arange(m_out)
+            slots = off + np.arange(m_out)
             if systematic:
-                u = (np.arange(m_out, dtype=np.float64) + self.u0[g]) / float(m_out)
+                u = (slots - off + self.u0[g]) / np.float64(m_out)
             else:
-                u = rng.uniform_f64(seed, frame, S_RESAMPLE, slots)
-            self.parent[slots] = self.find_parent(g, u * self.gtotal[g])
+                u = (self.tile_spc_prefix[self.gt0[g] + (slots - off) // TILE] + self.spc[slots]) / self.gspc[g]
+            live = off + np.arange(n)
+            edges = self.tile_prefix[self.gt0[g] + (live - off) // TILE] + self.cum[live]  # Eq. 17
+            self.parent[slots] = off + np.minimum(np.searchsorted(edges, u * self.gtotal[g], side="right"), n - 1)
 
     def set_counts(self, which: int, counts: np.ndarray) -> None:
         if which == 0:
@@ -257,6 +287,11 @@ class NumpyParticleKernels:
         s = slice(start, start + len(x))
         for name, value in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
             getattr(self, name)[b, s] = value
+
+    def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
+        for name, out in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
+            out[:] = getattr(self, name)[b, slots]
+        logw[:] = self.logw[slots]
 
     def load_labels(self, labels: np.ndarray) -> None:
         self.label[...] = labels

@@ -1,7 +1,7 @@
 """NumPy twin of ``tbd_taichi.kernels.rng``: the same bits for the same keys."""
 import numpy as np
 
-from ..kernels.rng import GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, TWO_PI
+from ..kernels.rng import GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, POLAR_TRIES, TWO_PI
 
 _U32 = np.uint32
 
@@ -43,15 +43,6 @@ def uniform(seed, frame, stream, index) -> np.ndarray:
     return unit_from_bits(hash_key(seed, frame, stream, index))
 
 
-def normal(seed, frame, stream, index) -> np.ndarray:
-    """N(0, 1) float32 variates for the keys (Box–Muller, f32 like the kernel)."""
-    h = hash_key(seed, frame, stream, index)
-    u1 = unit_from_bits(h)
-    with np.errstate(over="ignore"):
-        u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
-    return np.sqrt(np.float32(-2.0) * np.log(u1)) * np.cos(np.float32(TWO_PI) * u2)
-
-
 def uniform_f64(seed, frame, stream, index) -> np.ndarray:
     """U(0, 1) float64 with 53 random bits, the same values as the kernel."""
     h = hash_key(seed, frame, stream, index)
@@ -63,12 +54,26 @@ def uniform_f64(seed, frame, stream, index) -> np.ndarray:
 
 
 def normal_pair(seed, frame, stream, index) -> tuple[np.ndarray, np.ndarray]:
-    """Two float32 N(0, 1) arrays for the keys: r·cos and r·sin of one Box–Muller draw
-    (the kernel's ``normal_pair(key_prefix(seed, frame, stream), index)``)."""
-    h = hash_key(seed, frame, stream, index)
-    u1 = unit_from_bits(h)
-    with np.errstate(over="ignore"):
-        u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
-    r = np.sqrt(np.float32(-2.0) * np.log(u1))
-    a = np.float32(TWO_PI) * u2
-    return r * np.cos(a), r * np.sin(a)
+    """Two float32 N(0, 1) arrays for the keys by the polar method, attempt for attempt as the
+    kernel's ``normal_pair(key_prefix(seed, frame, stream), index)``."""
+    index = np.asarray(index, dtype=np.int64).reshape(-1)
+    out1, out2 = np.zeros(len(index), np.float32), np.zeros(len(index), np.float32)
+    todo = np.arange(len(index))
+    for k in range(POLAR_TRIES):
+        h = hash_key(seed, frame, stream, _as_u32(index[todo]) * _U32(POLAR_TRIES) + _U32(k))
+        u1 = unit_from_bits(h)
+        with np.errstate(over="ignore"):
+            u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
+        v1, v2 = np.float32(2.0) * u1 - np.float32(1.0), np.float32(2.0) * u2 - np.float32(1.0)
+        s = v1 * v1 + v2 * v2
+        ok = s < np.float32(1.0)
+        if k == POLAR_TRIES - 1:  # Box–Muller on the last attempt's uniforms
+            r = np.sqrt(np.float32(-2.0) * np.log(u1[~ok]))
+            a = np.float32(TWO_PI) * u2[~ok]
+            out1[todo[~ok]], out2[todo[~ok]] = r * np.cos(a), r * np.sin(a)
+        f = np.sqrt(np.float32(-2.0) * np.log(s[ok]) / s[ok])
+        out1[todo[ok]], out2[todo[ok]] = v1[ok] * f, v2[ok] * f
+        todo = todo[~ok]
+        if not len(todo):
+            break
+    return out1, out2
