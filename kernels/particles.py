@@ -32,7 +32,6 @@ S_RESAMPLE_END = 22
 # per-group sums of ``moments`` (f64)
 M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
 N_MOMENTS = 13
-STATE = ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")
 
 
 @ti.func
@@ -414,15 +413,15 @@ class ParticleKernels:
             self.n[g] = self.n_out[g]
 
     @ti.kernel
-    def write_slots(self, b: ti.i32, start: ti.i32, x: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    vx: ti.types.ndarray(dtype=ti.f32, ndim=1), y: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    vy: ti.types.ndarray(dtype=ti.f32, ndim=1), inten: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    e: ti.types.ndarray(dtype=ti.i32, ndim=1), tp: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                    seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """Host particle states into slots start … start + n − 1 of buffer b."""
+    def write_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                    inten: ti.types.ndarray(dtype=ti.f32, ndim=1), e: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Host particle states into ``slots`` of buffer b, in one launch for every group."""
         ti.loop_config(serialize=self.serial)
-        for k in range(x.shape[0]):
-            i = start + k
+        for k in range(slots.shape[0]):
+            i = slots[k]
             self.x[b, i] = x[k]
             self.vx[b, i] = vx[k]
             self.y[b, i] = y[k]

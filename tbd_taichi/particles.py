@@ -37,6 +37,7 @@ BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
 STATE_DTYPES = tuple((name, np.float32) for name in ("x", "vx", "y", "vy", "inten")) + \
     tuple((name, np.int32) for name in ("e", "tp", "seq")) + (("logw", np.float32),)
+STATE = tuple(name for name, _ in STATE_DTYPES[:-1])  # a particle's state (all but logw)
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 
 
@@ -236,19 +237,32 @@ class ParticlePool:
         return out
 
     def set_state(self, group_states: dict) -> None:
-        """Load particles: {group: dict of arrays x, vx, y, vy, inten, e, tp[, seq]}; sets the live counts."""
+        """Load particles: {group: dict of arrays x, vx, y, vy, inten, e, tp[, seq]}; sets the live counts
+        of those groups (the others keep theirs)."""
+        groups = np.array(sorted(group_states), dtype=np.int64)
+        sizes = [len(group_states[g]["x"]) for g in groups]
+        cols = {name: np.concatenate([np.broadcast_to(group_states[g].get(name, 0), n) for g, n in zip(groups, sizes)])
+                if sizes else np.zeros(0) for name in STATE}
+        self.load_states(np.repeat(groups, sizes), cols, groups)
+
+    def load_states(self, group: np.ndarray, cols: dict, groups=None) -> None:
+        """Load particles given as flat arrays: ``group`` (non-decreasing group of each particle) and
+        ``cols`` {x, vx, y, vy, inten, e, tp[, seq]}; the live count of every group in ``groups``
+        (default: all) becomes its number of particles, in one kernel launch."""
+        group = np.asarray(group, dtype=np.int64)
+        if len(group) and (np.diff(group) < 0).any():
+            raise ParameterError("particles must be ordered by group")
+        per_group = np.bincount(group, minlength=self.n_groups)[: self.n_groups]
         counts = self.counts.astype(np.int64).copy()
-        for g, st in group_states.items():
-            counts[g] = len(st["x"])
+        touched = np.arange(self.n_groups) if groups is None else np.asarray(groups, dtype=np.int64)
+        counts[touched] = per_group[touched]
         self._check_counts(counts, "particle count")
-        for g, st in group_states.items():
-            n = len(st["x"])
-            if n == 0:
-                continue
-            cols = [np.ascontiguousarray(np.broadcast_to(st.get(name, 0), n), dtype=dtype) for name, dtype in
-                    (("x", np.float32), ("vx", np.float32), ("y", np.float32), ("vy", np.float32),
-                     ("inten", np.float32), ("e", np.int32), ("tp", np.int32), ("seq", np.int32))]
-            self.k.write_slots(self.buf, int(self.off[g]), *cols)
+        if len(group):
+            start = np.cumsum(per_group) - per_group
+            slots = (self.off[group] + np.arange(len(group)) - start[group]).astype(np.int32)
+            arrays = [np.ascontiguousarray(np.broadcast_to(cols.get(name, 0), len(group)), dtype=dtype)
+                      for name, dtype in STATE_DTYPES[:-1]]  # all but logw
+            self.k.write_slots(self.buf, slots, *arrays)
         self.set_counts(counts)
 
     # ------------------------------------------------------------ one step

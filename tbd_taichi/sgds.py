@@ -39,7 +39,7 @@ from . import backend
 from .errors import InputError, ParameterError
 from .background import DEFAULT_BACKGROUND, Preprocessor
 from .params import SGDSParams
-from .particles import ParticlePool
+from .particles import STATE, ParticlePool
 from .pf import birth_intensity_range
 from .saliency import SaliencyExtractor
 from .tables import TRACK_DTYPE, make_table
@@ -50,7 +50,7 @@ DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are 
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
 
 
-@dataclass
+@dataclass(eq=False)  # tracks are compared by identity (list membership, removal)
 class Track:
     """One tracking PF's bookkeeping: confidence, confirmation counter and path (Eq. 39)."""
 
@@ -343,15 +343,14 @@ class SGDSPF:
                 handed.append(members)
         self._start_tracks(f, st, handed, rng)
         self._update_index_image(st, keep, counts[inverse])
-        bounds = np.searchsorted(st["group"][keep], np.arange(1, self.grid.n_blocks))
-        kept = {name: np.split(st[name][keep], bounds) for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}
-        pool.set_state({b: {name: kept[name][b] for name in kept} for b in range(self.grid.n_blocks)})
+        pool.load_states(st["group"][keep], {name: st[name][keep] for name in STATE})
 
     def _near_track(self, x: float, y: float) -> bool:
         return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)
 
     def _start_tracks(self, f: int, st: dict, handed: list, rng: np.random.Generator) -> None:
         n_tpf = self.p.N_tpf
+        new_states = {}
         for members in handed:
             if not self.free_groups:
                 break
@@ -361,13 +360,14 @@ class SGDSPF:
                 continue
             pick = members[resize_population(len(members), n_tpf, rng.random(max(n_tpf, len(members))))]
             group = self.free_groups.pop()
-            self.tracks_pool.set_state({group: {name: st[name][pick] for name in
-                                                ("x", "vx", "y", "vy", "inten", "e", "tp", "seq")}})
+            new_states[group] = {name: st[name][pick] for name in STATE}
             track = Track(self.next_track_id, group, path=deque(maxlen=None if self.history else 1))
             self.next_track_id += 1
             track.path.append((f, x, y, float(st["vx"][members][e].mean()), float(st["vy"][members][e].mean()),
                                float(st["inten"][members][e].mean()), 1.0))
             self.active.append(track)
+        if new_states:
+            self.tracks_pool.set_state(new_states)
 
     def _update_index_image(self, st: dict, keep: np.ndarray, pp_size: np.ndarray) -> None:
         """P_pp: each pixel gets the PP whose particles fall in it; the larger PP (``pp_size`` per particle) wins."""

@@ -245,6 +245,27 @@ def test_capacity_overflow_is_a_clear_error_and_changes_nothing(rng):
         ParticlePool([10, 0], (5, 5))
 
 
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_load_states_round_trip(rng, engine):
+    """Flat per-group states in, the same states out; groups left out keep their particles."""
+    pool = ParticlePool([5, 7, 4], SHAPE, engine=engine)
+    pool.set_state({2: dict(x=np.arange(3.0), y=np.ones(3), e=1), 0: dict(x=np.full(2, 9.0), inten=np.arange(2.0))})
+    st = pool.state()
+    np.testing.assert_array_equal(st["group"], [0, 0, 2, 2, 2])
+    np.testing.assert_array_equal(st["slot"], [0, 1, 12, 13, 14])
+    np.testing.assert_array_equal(st["x"], [9, 9, 0, 1, 2])
+    np.testing.assert_array_equal(st["inten"], [0, 1, 0, 0, 0])
+    np.testing.assert_array_equal(st["e"], [0, 0, 1, 1, 1])
+    pool.load_states(np.array([1, 1]), dict(x=np.array([4.0, 5.0])), groups=[1])
+    assert pool.counts.tolist() == [2, 2, 3]
+    pool.load_states(np.array([1]), dict(x=np.array([6.0])))  # all groups: 0 and 2 become empty
+    assert pool.counts.tolist() == [0, 1, 0] and pool.state()["x"].tolist() == [6.0]
+    with pytest.raises(ParameterError, match="ordered by group"):
+        pool.load_states(np.array([2, 0]), dict(x=np.zeros(2)))
+    with pytest.raises(ParameterError, match="group 2: particle count 5 exceeds its capacity 4"):
+        pool.load_states(np.full(5, 2), dict(x=np.zeros(5)))
+
+
 def test_estimates_eq19_and_covariance(rng):
     (t, _), _ = make_pools(rng)
     est, s = t.estimates(), t.state()

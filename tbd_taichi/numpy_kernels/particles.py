@@ -283,10 +283,9 @@ class NumpyParticleKernels:
     def load_frame(self, z: np.ndarray) -> None:
         self.z[...] = z
 
-    def write_slots(self, b, start, x, vx, y, vy, inten, e, tp, seq) -> None:
-        s = slice(start, start + len(x))
+    def write_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq) -> None:
         for name, value in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
-            getattr(self, name)[b, s] = value
+            getattr(self, name)[b, slots] = value
 
     def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
         for name, out in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
