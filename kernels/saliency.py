@@ -108,11 +108,10 @@ def add_row_moments(v: VEC, s1: ti.f64, s2: ti.f64):
 # ---------------------------------------------------------------- pipeline kernels
 
 @ti.kernel
-def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_scalar: ti.template(),
-               z_rows: ti.template(), serial: ti.template()):
-    """Store a padded host frame (H, ⌈W/8⌉) of 8-vectors into ring slot ``zs`` (lane and scalar
-    layouts; the scalar one serves the sparse 5×5 correlations) and its per-row (Σ z, Σ z²) in
-    f64 (for Eq. 26)."""
+def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_rows: ti.template(),
+               serial: ti.template()):
+    """Store a padded host frame (H, ⌈W/8⌉) of 8-vectors into ring slot ``zs`` and its per-row
+    (Σ z, Σ z²) in f64 (for Eq. 26)."""
     ti.loop_config(serialize=serial, block_dim=ROW_BLOCK)
     for y in range(src.shape[0]):
         s1 = ti.cast(0.0, ti.f64)
@@ -121,9 +120,6 @@ def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: t
             v = src[y, xb]
             z[zs, y, xb] = v
             s1, s2 = add_row_moments(v, s1, s2)
-            for k in ti.static(range(LANES)):
-                if xb * LANES + k < z_scalar.shape[2]:
-                    z_scalar[zs, y, xb * LANES + k] = v[k]
         z_rows[zs, y, 0] = s1
         z_rows[zs, y, 1] = s2
 
@@ -239,21 +235,23 @@ def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32
 
 
 @ti.func
-def correlate_d(z: ti.template(), zs: ti.i32, d: ti.template(), y: ti.i32, x: ti.i32) -> ti.f32:
-    """(z ⋆ D)(y, x) over the 5×5 window, zero outside the image (Eq. 27's B·σ²), on a scalar ring."""
-    acc = ti.f32(0.0)
-    for dy, dx in ti.static(ti.ndrange(5, 5)):
-        yy, xx = y + dy - 2, x + dx - 2
-        v = ti.f32(0.0)
-        if 0 <= yy < z.shape[1] and 0 <= xx < z.shape[2]:
-            v = z[zs, yy, xx]
-        acc += d[dy, dx] * v
+def correlate_d(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), y: ti.i32, xb: ti.i32) -> VEC:
+    """(z ⋆ D) at the 8 pixels of (y, xb) over the 5×5 window, zero outside the image (Eq. 27's B·σ²);
+    terms added in (dy, dx) row-major order, like the NumPy twin."""
+    acc = VEC(0.0)
+    for dy in ti.static(range(5)):
+        if 0 <= y + dy - 2 < z.shape[1]:
+            prev = row_vector(z, zs, y + dy - 2, xb - 1, valid, 0.0)
+            cur = row_vector(z, zs, y + dy - 2, xb, valid, 0.0)
+            nxt = row_vector(z, zs, y + dy - 2, xb + 1, valid, 0.0)
+            for dx in ti.static(range(5)):
+                acc += d[dy, dx] * lane_shift(prev, cur, nxt, dx - 2)
     return acc
 
 
 @ti.func
-def lef_log_weight(b: ti.f32, a: ti.f32, i_min: ti.f32, i_max: ti.f32) -> ti.f32:
-    """Eqs. 27–28: max over I in [i_min, i_max] of −A·I² + B·I, at I_c = clamp(B/(2A))."""
+def lef_log_weight(b, a, i_min, i_max):
+    """Eqs. 27–28: max over I in [i_min, i_max] of −A·I² + B·I, at I_c = clamp(B/(2A)) (scalar or lanes)."""
     ic = ti.min(ti.max(b / (ti.f32(2.0) * a), i_min), i_max)
     return b * ic - a * (ic * ic)
 
@@ -274,11 +272,11 @@ def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.templat
             keep = (ti.cast(acc2[0, y, xb], ti.f64) > threshold) & (acc[s, y, xb] == acc_max[s, y, xb]) & \
                 (valid[xb] > 0)
             if keep.any():
+                lw = lef_log_weight(correlate_d(z, s, valid, d, y, xb), a, i_min, i_max)
                 for k in ti.static(range(LANES)):
                     if keep[k]:
-                        x = xb * LANES + k
-                        row_x[y, n] = x
-                        row_logw[y, n] = lef_log_weight(correlate_d(z, s, d, y, x), a, i_min, i_max)
+                        row_x[y, n] = xb * LANES + k
+                        row_logw[y, n] = lw[k]
                         n += 1
         n_row[y] = n
 
@@ -396,15 +394,15 @@ def max_filter(src: ti.template(), ss: ti.i32, valid: ti.template(), tmp: ti.tem
 
 
 @ti.kernel
-def lef_map(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, i_min: ti.f32, i_max: ti.f32,
-            out: ti.template()):
-    """Likelihood estimation filter (Eqs. 25–28) at every pixel of a scalar ring: log ω̌_lef (σ = 1)."""
-    for y, x in out:
-        out[y, x] = lef_log_weight(correlate_d(z, zs, d, y, x), a, i_min, i_max)
+def lef_map(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), a: ti.f32, i_min: ti.f32,
+            i_max: ti.f32, out: ti.template()):
+    """Likelihood estimation filter (Eqs. 25–28) at every pixel of a lane ring: log ω̌_lef (σ = 1)."""
+    for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
+        out[0, y, xb] = lef_log_weight(correlate_d(z, zs, valid, d, y, xb), a, i_min, i_max)
 
 
 @ti.kernel
-def correlate_map(z: ti.template(), zs: ti.i32, d: ti.template(), out: ti.template()):
-    """z ⋆ D at every pixel of a scalar ring (zero padding)."""
-    for y, x in out:
-        out[y, x] = correlate_d(z, zs, d, y, x)
+def correlate_map(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), out: ti.template()):
+    """z ⋆ D at every pixel of a lane ring (zero padding)."""
+    for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
+        out[0, y, xb] = correlate_d(z, zs, valid, d, y, xb)

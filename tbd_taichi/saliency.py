@@ -199,7 +199,6 @@ class TaichiSaliencyEngine:
         f = types.SimpleNamespace(valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes),
                                   ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
         f.hs, f.hm, f.tmp, f.tmp2, f.acc2 = image(), image(), image(), image(), image()
-        f.z_scalar = ti.field(ti.f32, shape=(3, h, w))
         f.z_rows = ti.field(ti.f64, shape=(3, h, 2))
         f.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
         f.row_x = ti.field(ti.i32, shape=(h, w))
@@ -222,7 +221,7 @@ class TaichiSaliencyEngine:
 
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         ks = self.ks
-        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.f.ring["z"], slot, self.f.z_scalar, self.f.z_rows, self.serial)
+        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.f.ring["z"], slot, self.f.z_rows, self.serial)
         ks.energy_collection_max(self.f.ring["z"], slot, self.f.valid, self.f.hs, self.f.hm, self.f.tmp, self.f.tmp2,
                                  self.f.ring["se_max"], slot, self.r, self.serial)
 
@@ -234,7 +233,7 @@ class TaichiSaliencyEngine:
         ks = self.ks
         ks.accumulate_moments(self.f.ring["acc_max"], *slots, scale, self.f.acc2, self.f.acc2_rows, self.serial)
         ks.frame_statistics(self.f.acc2_rows, self.f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.f.stats)
-        ks.segment_and_lef(self.f.acc2, self.f.ring["acc"], self.f.ring["acc_max"], slot, self.f.z_scalar, self.f.valid, self.f.d,
+        ks.segment_and_lef(self.f.acc2, self.f.ring["acc"], self.f.ring["acc_max"], slot, self.f.ring["z"], self.f.valid, self.f.d,
                            a, self.f.stats, self.f.row_x, self.f.row_logw, self.f.n_row, self.serial)
         ks.block_proposal(self.f.row_x, self.f.row_logw, self.f.n_row, self.f.block_id, self.f.block_offset, self.f.block_nnz,
                           self.f.block_max, self.f.entry_pixel, self.f.entry_logw, self.f.entry_sal, self.f.scratch,

@@ -18,12 +18,6 @@ D = psf_matrix(0.7)
 A = float((D.astype(np.float64) ** 2).sum() / 2)
 
 
-def ring(img):
-    f = ti.field(ti.f32, shape=(1,) + img.shape)
-    f.from_numpy(img[None].astype(np.float32))
-    return f
-
-
 def lane_ring(img):
     """A one-slot lane-layout ring holding ``img``, its validity mask and the lane count."""
     blocks, valid = lane_layout(img.shape[1])
@@ -97,11 +91,12 @@ def test_energy_collection_where_the_maximum_is_not_positive():
 @pytest.mark.parametrize("shape", SHAPES)
 def test_correlation_against_scipy_and_cv2(rng, shape):
     z = random_image(rng, shape, "normal")
-    dst = ti.field(ti.f32, shape=shape)
+    src, valid, blocks = lane_ring(z)
+    dst = lane_out(shape, blocks)
     dfield = ti.field(ti.f32, shape=(5, 5))
     dfield.from_numpy(D)
-    ks.correlate_map(ring(z), 0, dfield, dst)
-    got = dst.to_numpy()
+    ks.correlate_map(src, 0, valid, dfield, dst)
+    got = from_lanes(dst.to_numpy()[0], shape[1])
     np.testing.assert_array_equal(got, nps.correlate_d(z, D))
     ref = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")
     np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6 * max(1, np.abs(z).max()))  # 25 f32 terms ≤ 1
@@ -113,11 +108,12 @@ def test_correlation_against_scipy_and_cv2(rng, shape):
 def test_lef_is_the_maximum_over_the_intensity_range(rng, snr):
     z = rng.standard_normal((20, 24)).astype(np.float32) * 2
     i_min, i_max = intensity_range(0.0, 1.0, snr)
-    dst = ti.field(ti.f32, shape=z.shape)
+    src, valid, blocks = lane_ring(z)
+    dst = lane_out(z.shape, blocks)
     dfield = ti.field(ti.f32, shape=(5, 5))
     dfield.from_numpy(D)
-    ks.lef_map(ring(z), 0, dfield, A, i_min, i_max, dst)
-    got = dst.to_numpy()
+    ks.lef_map(src, 0, valid, dfield, A, i_min, i_max, dst)
+    got = from_lanes(dst.to_numpy()[0], z.shape[1])
     np.testing.assert_allclose(got, nps.lef_map(z, D, 1.0, A, i_min, i_max), rtol=1e-6, atol=1e-6)
     b = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")
     grid = np.linspace(i_min, i_max, 4001)
