@@ -76,15 +76,16 @@ def isolated_spikes(z: F2, rate: F2, rho: ti.f32, z_hi: ti.f32, ratio: ti.f32, r
     h, w = z.shape[0], z.shape[1]
     for i, j in z:
         a = ti.abs(z[i, j])
-        neighbours = 0.0
-        for di, dj in ti.static(ti.ndrange((-1, 2), (-1, 2))):
-            if ti.static(di != 0 or dj != 0):
-                ii, jj = i + di, j + dj
-                if 0 <= ii < h and 0 <= jj < w:
-                    neighbours = ti.max(neighbours, ti.abs(z[ii, jj]))
         spike = 0.0
-        if a > z_hi and neighbours < ratio * a:
-            spike = 1.0
+        if a > z_hi:  # rare: only then look at the neighbours
+            neighbours = 0.0
+            for di, dj in ti.static(ti.ndrange((-1, 2), (-1, 2))):
+                if ti.static(di != 0 or dj != 0):
+                    ii, jj = i + di, j + dj
+                    if 0 <= ii < h and 0 <= jj < w:
+                        neighbours = ti.max(neighbours, ti.abs(z[ii, jj]))
+            if neighbours < ratio * a:
+                spike = 1.0
         rate[i, j] = (1.0 - rho) * rate[i, j] + rho * spike
         out[i, j] = z[i, j]
         if rate[i, j] > rate_max:
