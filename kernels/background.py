@@ -11,30 +11,37 @@ import taichi as ti
 F2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
 
+@ti.func
+def pixel(line: ti.i32, k: ti.i32, along_rows: ti.template()):
+    """(row, column) of element k of row ``line`` (along_rows) or of column ``line``."""
+    return (line, k) if ti.static(along_rows) else (k, line)
+
+
+@ti.func
+def running_box_sum(src: ti.template(), dst: ti.template(), r: ti.i32, line: ti.i32, along_rows: ti.template()):
+    """dst = Σ_{|d| ≤ r} src at clamp(k + d) along one row or column, as a running f64 sum."""
+    n = src.shape[1] if ti.static(along_rows) else src.shape[0]
+    acc = ti.f64(0.0)
+    for d in range(-r, r + 1):
+        acc += ti.f64(src[pixel(line, ti.max(ti.min(d, n - 1), 0), along_rows)])
+    for k in range(n):
+        dst[pixel(line, k, along_rows)] = ti.cast(acc, ti.f32)
+        acc += ti.f64(src[pixel(line, ti.min(k + r + 1, n - 1), along_rows)]) - \
+            ti.f64(src[pixel(line, ti.max(k - r, 0), along_rows)])
+
+
 @ti.kernel
 def box_sum_rows(src: F2, dst: F2, r: ti.i32):
     """dst[i, j] = Σ_{|d| ≤ r} src[i, clamp(j + d)]: a (2r+1)-wide running sum along each row."""
-    h, w = src.shape[0], src.shape[1]
-    for i in range(h):
-        acc = ti.f64(0.0)
-        for d in range(-r, r + 1):
-            acc += ti.f64(src[i, ti.max(ti.min(d, w - 1), 0)])
-        for j in range(w):
-            dst[i, j] = ti.cast(acc, ti.f32)
-            acc += ti.f64(src[i, ti.min(j + r + 1, w - 1)]) - ti.f64(src[i, ti.max(j - r, 0)])
+    for i in range(src.shape[0]):
+        running_box_sum(src, dst, r, i, True)
 
 
 @ti.kernel
 def box_sum_cols(src: F2, dst: F2, r: ti.i32):
     """dst[i, j] = Σ_{|d| ≤ r} src[clamp(i + d), j]: the column pass of the separable box sum."""
-    h, w = src.shape[0], src.shape[1]
-    for j in range(w):
-        acc = ti.f64(0.0)
-        for d in range(-r, r + 1):
-            acc += ti.f64(src[ti.max(ti.min(d, h - 1), 0), j])
-        for i in range(h):
-            dst[i, j] = ti.cast(acc, ti.f32)
-            acc += ti.f64(src[ti.min(i + r + 1, h - 1), j]) - ti.f64(src[ti.max(i - r, 0), j])
+    for j in range(src.shape[1]):
+        running_box_sum(src, dst, r, j, False)
 
 
 @ti.kernel

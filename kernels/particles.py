@@ -307,16 +307,21 @@ class ParticleKernels:
                 self.cum[i] = s
             self.tile_total[t] = s
 
+    @ti.func
+    def exclusive_tile_prefix(self, g: ti.i32, totals: ti.template(), prefix: ti.template()) -> ti.f64:
+        """prefix[t] = Σ of group g's tile totals before tile t, added in tile order (f64); returns their sum."""
+        s = ti.cast(0.0, ti.f64)
+        for t in range(self.gt0[g], self.gt1[g]):
+            prefix[t] = s
+            s += totals[t]
+        return s
+
     @ti.kernel
     def group_prefix(self):
         """Eq. 17 across tiles: exclusive prefix of tile totals per group, and the group total."""
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
-            s = ti.cast(0.0, ti.f64)
-            for t in range(self.gt0[g], self.gt1[g]):
-                self.tile_prefix[t] = s
-                s += self.tile_total[t]
-            self.gtotal[g] = s
+            self.gtotal[g] = self.exclusive_tile_prefix(g, self.tile_total, self.tile_prefix)
 
     @ti.func
     def out_tile_end(self, t: ti.i32) -> ti.i32:
@@ -363,11 +368,8 @@ class ParticleKernels:
         key = key_prefix(seed, frame, S_RESAMPLE_END)
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
-            s = ti.cast(0.0, ti.f64)
-            for t in range(self.gt0[g], self.gt1[g]):
-                self.tile_spc_prefix[t] = s
-                s += self.tile_spc[t]
-            self.gspc[g] = s - ti.log(uniform_f64_at(key, g))
+            self.gspc[g] = self.exclusive_tile_prefix(g, self.tile_spc, self.tile_spc_prefix) - \
+                ti.log(uniform_f64_at(key, g))
 
     @ti.kernel
     def draw_parents(self, systematic: ti.i32):

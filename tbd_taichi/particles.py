@@ -228,13 +228,17 @@ class ParticlePool:
     def state(self) -> dict:
         """Live particles of the current buffer: arrays x, vx, y, vy, inten, e, tp, seq, group, slot, logw."""
         group = np.repeat(np.arange(self.n_groups), self.counts)
-        slots = (np.arange(len(group)) - np.repeat(np.cumsum(self.counts) - self.counts, self.counts)
-                 + self.off[group]).astype(np.int32)
+        slots = self._slots_in_order(group, self.counts)
         out = {name: np.empty(len(slots), dtype) for name, dtype in STATE_DTYPES}
         if len(slots):
             self.k.read_slots(self.buf, slots, *out.values())
         out.update(group=group, slot=slots.astype(np.int64))
         return out
+
+    def _slots_in_order(self, group: np.ndarray, per_group: np.ndarray) -> np.ndarray:
+        """Slots of particles listed by non-decreasing ``group``: each group's k-th goes to off_g + k."""
+        start = np.cumsum(per_group) - per_group
+        return (self.off[group] + np.arange(len(group)) - start[group]).astype(np.int32)
 
     def set_state(self, group_states: dict) -> None:
         """Load particles: {group: dict of arrays x, vx, y, vy, inten, e, tp[, seq]}; sets the live counts
@@ -258,8 +262,7 @@ class ParticlePool:
         counts[touched] = per_group[touched]
         self._check_counts(counts, "particle count")
         if len(group):
-            start = np.cumsum(per_group) - per_group
-            slots = (self.off[group] + np.arange(len(group)) - start[group]).astype(np.int32)
+            slots = self._slots_in_order(group, per_group)
             arrays = [np.ascontiguousarray(np.broadcast_to(cols.get(name, 0), len(group)), dtype=dtype)
                       for name, dtype in STATE_DTYPES[:-1]]  # all but logw
             self.k.write_slots(self.buf, slots, *arrays)

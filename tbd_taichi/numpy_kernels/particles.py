@@ -254,8 +254,7 @@ class NumpyParticleKernels:
     def group_spacings(self, seed: int, frame: int) -> None:
         end = -np.log(rng.uniform_f64(seed, frame, S_RESAMPLE_END, np.arange(len(self.off))))
         for g in range(len(self.off)):
-            self.gspc[g] = self._exclusive_prefix(self.tile_spc, self.gt0[g], self.gt1[g], self.tile_spc_prefix)
-            self.gspc[g] = self.gspc[g] + end[g]
+            self.gspc[g] = self._exclusive_prefix(self.tile_spc, self.gt0[g], self.gt1[g], self.tile_spc_prefix) + end[g]
 
     def draw_parents(self, systematic: int) -> None:
         for g in range(len(self.off)):
