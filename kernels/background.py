@@ -62,6 +62,25 @@ def running_residual(x: F2, bg: F2, alpha: ti.f32, first: ti.i32, out: F2):
 
 
 @ti.kernel
+def rebase_background(s: F2, prev_r: F2, bg: F2):
+    """bg = s − prev_r: after a global change (codec keyframe, gain step) the change is taken as
+    background, so the residual s − bg carries the previous frame's foreground over."""
+    for i, j in s:
+        bg[i, j] = s[i, j] - prev_r[i, j]
+
+
+@ti.kernel
+def row_abs_difference_sums(a: F2, b: F2, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    """out[i] = Σ_j |a[i, j] − b[i, j]| in f64, one row per thread (the caller sums the rows in a
+    fixed order, so the total does not depend on the thread count)."""
+    for i in range(a.shape[0]):
+        acc = ti.f64(0.0)
+        for j in range(a.shape[1]):
+            acc += ti.abs(ti.f64(a[i, j]) - ti.f64(b[i, j]))
+        out[i] = acc
+
+
+@ti.kernel
 def clipped_abs(r: F2, clip: ti.f32, out: F2):
     """min(|r|, clip): the robust input of the local noise estimate."""
     for i, j in r:

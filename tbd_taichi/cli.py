@@ -225,8 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--plot", default=None, help="PNG of the tracks over the max-projection (with the truth if given)")
     tr.add_argument("--background", choices=BACKGROUNDS, default=DEFAULT_BACKGROUND,
                     help="background suppression before the filters: none (global median and σ, as in the paper; "
-                         "default), mean, spatial (hollow local mean: use it for real video with clutter) or temporal "
-                         "(running mean, still cameras), the last three with a local noise σ")
+                         "default), mean, spatial (hollow local mean), temporal (running mean) or spatiotemporal (the spatial "
+                         "residual minus its running mean: for real still-camera video use it with --snr 5), all but "
+                         "none with a local noise σ")
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", action="store_true", help="show a progress bar")

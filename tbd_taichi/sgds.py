@@ -397,6 +397,8 @@ class SGDSPF:
             t.confidence = update_confidence(t.confidence, icef(float(log_mtw[g]), log_msw),
                                              scef(est.cov[g], p.T_devr))
             if np.isfinite(est.x[g]):  # Eq. 39
+                if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's
+                    t.path.pop()
                 t.path.append((f, float(est.x[g]), float(est.y[g]), float(est.vx[g]), float(est.vy[g]),
                                float(est.intensity[g]), t.confidence))
             x, y = t.last_xy()

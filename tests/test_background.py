@@ -47,6 +47,16 @@ def test_elementwise_kernels_match_twins(rng, shape):
         getattr(kb, name)(*args, got)
         getattr(nb, name)(*args, ref)
         np.testing.assert_allclose(got, ref, rtol=F32_RTOL, atol=1e-6, err_msg=name)
+    got, ref = np.zeros_like(x), np.zeros_like(x)
+    kb.rebase_background(x, a, got)
+    nb.rebase_background(x, a, ref)
+    np.testing.assert_array_equal(got, ref)
+    rows_t, rows_n = np.zeros(shape[0]), np.zeros(shape[0])
+    big = x * np.float32(1e4)  # f64 sums of f32 inputs: exact up to f64 rounding, whatever the order
+    kb.row_abs_difference_sums(big, a, rows_t)
+    nb.row_abs_difference_sums(big, a, rows_n)
+    np.testing.assert_allclose(rows_t, rows_n, rtol=1e-12)
+    np.testing.assert_allclose(rows_t, np.abs(big.astype(np.float64) - a).sum(axis=1), rtol=1e-12)
     bg_t, bg_n = np.zeros_like(x), np.zeros_like(x)
     for first, frame in enumerate([x, a, b][::-1]):
         got, ref = np.zeros_like(x), np.zeros_like(x)
@@ -83,6 +93,63 @@ def test_spatial_background_removes_a_gradient_and_keeps_the_target():
     clutter = (1.5 * xx + 10 * np.sin(yy / 15.0)).ravel()
     corr = lambda img: np.corrcoef(img.ravel(), clutter)[0, 1]  # noqa: E731
     assert abs(corr(z)) < 0.3 and corr(z_none) > 0.9  # suppression removes the clutter, not only the offset
+
+
+def static_clutter_scene(frames=60, seed=3):
+    """A moving SNR-3 target on N(0, 1) noise plus fixed point-like clutter blobs (z ≈ 6)."""
+    scene = tbd.simulate((64, 64), frames, snr=3.0, seed=seed)
+    yy, xx = np.mgrid[:64, :64]
+    blobs = [(12, 50), (48, 15), (30, 30)]
+    clutter = sum(6 * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 0.7 ** 2)) for y, x in blobs)
+    return scene, (scene.frames + clutter).astype(np.float32), blobs
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_spatiotemporal_removes_still_clutter_and_keeps_a_moving_target(engine):
+    scene, frames, blobs = static_clutter_scene()
+    pre = {m: background.Preprocessor((64, 64), m, bad_pixels=False, engine=engine) for m in ("spatial", "spatiotemporal")}
+    z = {m: np.stack([p(f) for f in frames]) for m, p in pre.items()}
+    late = slice(40, 60)  # after 40 frames the running mean holds the clutter; the target has moved on
+    for y, x in blobs:
+        assert z["spatial"][late, y, x].mean() > 4  # spatial suppression keeps point-like clutter
+        assert abs(z["spatiotemporal"][late, y, x].mean()) < 1.0, (y, x)
+    t = scene.truth
+    peak = [z["spatiotemporal"][f, int(round(r["y"])), int(round(r["x"]))] for f in range(40, 60)
+            for r in t[t["frame"] == f]]
+    assert np.mean(peak) > 1.5  # SNR 3 point-sampled at the nearest pixel: about 2.4 expected
+    noise = z["spatiotemporal"][late].copy()
+    for y, x in blobs:
+        noise[:, y - 2:y + 3, x - 2:x + 3] = 0
+    assert 0.85 < noise.std() < 1.2  # still unit-variance noise
+
+
+def keyframe_scene(t_key=30, frames=50):
+    """A still, noise-free scene (compressed video repeats static blocks exactly) whose texture is
+    re-drawn at ``t_key`` (a codec keyframe), with a bright target moving 0.8 px/frame along row 32."""
+    rng = np.random.default_rng(4)
+    a, b = rng.standard_normal((2, 64, 64)).astype(np.float32)
+    yy, xx = np.mgrid[:64, :64]
+    out = []
+    for f in range(frames):
+        target = 2.0 * np.exp(-((xx - 10 - 0.8 * f) ** 2 + (yy - 32) ** 2) / (2 * 0.7 ** 2))
+        out.append((a if f < t_key else b) + target + 0.01 * rng.standard_normal((64, 64)))
+    return np.array(out, np.float32)
+
+
+def test_keyframe_rebases_the_background_once(monkeypatch):
+    """The keyframe, and only it, re-bases the background: the new texture does not light up and the
+    target stays.  With the re-base switched off the texture change becomes a field of 5σ+ outliers."""
+    frames = keyframe_scene()
+    pre = background.Preprocessor((64, 64), "spatiotemporal", bad_pixels=False)
+    z = np.stack([pre(f) for f in frames])
+    assert pre.global_changes == [30], pre.global_changes
+    away = np.abs(np.arange(64) - 32)[:, None] > 3  # rows away from the target's path
+    assert np.abs(z[30:40][:, away[:, 0]]).max() < 3.0
+    assert min(z[f, 32, int(round(10 + 0.8 * f))] for f in range(30, 40)) > 3.0
+    monkeypatch.setattr(background, "JUMP_RATIO", 1e9)
+    pre = background.Preprocessor((64, 64), "spatiotemporal", bad_pixels=False)
+    z = np.stack([pre(f) for f in frames])
+    assert pre.global_changes == [] and np.abs(z[30:40][:, away[:, 0]]).max() > 5.0
 
 
 def inject_bad_pixels(frames, rng):
@@ -130,8 +197,10 @@ def test_bad_arguments():
 
 
 def test_real_clip_regression():
-    """First 60 frames of the real clip IR_DRONE_021 (CC0, tests/data): with spatial background
-    suppression the drone is confirmed and held; without it (the paper's "none"), clutter wins."""
+    """First 60 frames of the real clip IR_DRONE_021 (CC0, tests/data).  With the real-video settings
+    (spatiotemporal background, snr 5) the drone is confirmed and held with almost no false points;
+    spatial suppression alone holds it but confirms still clutter too; without suppression (the
+    paper's "none") clutter wins."""
     from pathlib import Path
 
     from tbd_taichi import io, metrics, tables
@@ -141,11 +210,14 @@ def test_real_clip_regression():
     boxes = tables.read_boxes(data / "IR_DRONE_021.csv")
     boxes = boxes[boxes["frame"] < 60]
     scores = {}
-    for mode in ("spatial", "none"):
-        tracker = tbd.SGDSPF(frames.shape[1:], background=mode)
+    for name, kw in [("real", background.REAL_VIDEO), ("spatial", dict(background="spatial")),
+                     ("none", dict(background="none"))]:
+        tracker = tbd.SGDSPF(frames.shape[1:], **kw)
         online = [row for frame in frames for row in tracker.update(frame)]
         tracker.finish()
-        scores[mode] = metrics.box_scores(tables.make_table(online, tables.TRACK_DTYPE), boxes, 60)
-    assert scores["spatial"]["detection_rate"] > 0.7 and scores["spatial"]["first_confirmation"] <= 15, scores
-    assert scores["spatial"]["false_points"] < 3.5, scores  # measured 2.7/frame over 150 frames (see drone_ir.md)
+        scores[name] = metrics.box_scores(tables.make_table(online, tables.TRACK_DTYPE), boxes, 60)
+    # measured: real 0.72 / 0.02 false points / confirmed at frame 17; spatial 0.82 / 2.2 / 11; none 0.0 / 8.0
+    assert scores["real"]["detection_rate"] > 0.6 and scores["real"]["first_confirmation"] <= 25, scores
+    assert scores["real"]["false_points"] < 0.3, scores
+    assert scores["spatial"]["detection_rate"] > 0.7 and scores["spatial"]["false_points"] > 1.0, scores
     assert scores["none"]["detection_rate"] < 0.2, scores

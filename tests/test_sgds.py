@@ -74,6 +74,8 @@ def test_snr2_target_is_confirmed_and_followed(shape, frames, seeds):
         assert scores["dsr"] >= 0.8, (seed, scores)
         assert scores["false_tracks"] == 0, (seed, scores)
         assert scores["edt_mean"] < 0.8
+        keys = tracks[["frame", "track_id"]]
+        assert len(np.unique(keys)) == len(keys)  # one row per track and frame (Eq. 39's path)
 
 
 def test_snr14_target_is_still_found_at_50x50():

@@ -34,6 +34,14 @@ def running_residual(x, bg, alpha: float, first: int, out) -> None:
     bg += np.float32(alpha) * (x - bg)
 
 
+def rebase_background(s, prev_r, bg) -> None:
+    bg[...] = s - prev_r
+
+
+def row_abs_difference_sums(a, b, out) -> None:
+    out[...] = np.abs(a.astype(np.float64) - b.astype(np.float64)).sum(axis=1)
+
+
 def clipped_abs(r, clip: float, out) -> None:
     out[...] = np.minimum(np.abs(r), np.float32(clip))
 
