@@ -151,10 +151,9 @@ class Preprocessor:
         if t > 0 and self.is_global_change(s):
             self.k.rebase_background(s, self.prev_r, self.st_bg)
             self.global_changes.append(t)
-        r = np.empty(self.shape, np.float32)
+        r = self.prev_r  # read by the re-base above; now this frame's residual
         self.k.running_residual(s, self.st_bg, max(ST_ALPHA, 1.0 / (t + 1)), int(t == 0), r)
         np.copyto(self.prev_s, s)
-        np.copyto(self.prev_r, r)
         return r
 
     def moving_standardised(self, x: np.ndarray) -> np.ndarray:
@@ -163,20 +162,26 @@ class Preprocessor:
         sigma_s = robust_sigma(s)
         r = self.moving_residual(s)
         t = self.n_frames
-        self.k.clipped_abs(r, NOISE_CLIP * sigma_s, self.sum_a)
-        self.box_sum(self.sum_a, self.sum_b, NOISE_RADIUS)
-        self.k.running_residual(self.sum_b, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)), int(t == 0), self.tmp)
-        z = np.empty(self.shape, np.float32)
-        self.k.standardise(r, self.st_noise, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, ST_FLOOR * sigma_s, z)
-        return z
+        abs_sum = self.local_abs_sum(r, NOISE_CLIP * sigma_s)
+        self.k.running_residual(abs_sum, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)), int(t == 0), self.tmp)
+        return self.over_local_sigma(r, self.st_noise, ST_FLOOR * sigma_s)
 
     def standardised(self, r: np.ndarray) -> np.ndarray:
         """r / local σ (see the module notes); global σ from the residual's MAD."""
         sigma = robust_sigma(r)
-        self.k.clipped_abs(r, NOISE_CLIP * sigma, self.sum_a)
+        return self.over_local_sigma(r, self.local_abs_sum(r, NOISE_CLIP * sigma), NOISE_FLOOR * sigma)
+
+    def local_abs_sum(self, r: np.ndarray, clip: float) -> np.ndarray:
+        """Σ of min(|r|, clip) over the (2·NOISE_RADIUS + 1)² window around each pixel (in sum_b)."""
+        self.k.clipped_abs(r, clip, self.sum_a)
         self.box_sum(self.sum_a, self.sum_b, NOISE_RADIUS)
-        z = np.empty(self.shape, np.float32)  # a new array: callers keep recent frames
-        self.k.standardise(r, self.sum_b, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, NOISE_FLOOR * sigma, z)
+        return self.sum_b
+
+    def over_local_sigma(self, r: np.ndarray, abs_sum: np.ndarray, floor: float) -> np.ndarray:
+        """z = r / max(√(π/2)·abs_sum/window, floor): the residual over its local σ (a new array:
+        callers keep recent frames)."""
+        z = np.empty(self.shape, np.float32)
+        self.k.standardise(r, abs_sum, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, floor, z)
         return z
 
     def bad_pixel_map(self) -> np.ndarray:

@@ -11,6 +11,7 @@ import numpy as np
 from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
                                   S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, S_NOISE_I,
                                   S_NOISE_V, S_NOISE_XY, S_RESAMPLE, S_RESAMPLE_END, TILE, TWO_PI)
+from ..particles import STATE
 from . import rng
 
 F32 = np.float32
@@ -283,11 +284,11 @@ class NumpyParticleKernels:
         self.z[...] = z
 
     def write_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq) -> None:
-        for name, value in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
+        for name, value in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
             getattr(self, name)[b, slots] = value
 
     def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
-        for name, out in zip(("x", "vx", "y", "vy", "inten", "e", "tp", "seq"), (x, vx, y, vy, inten, e, tp, seq)):
+        for name, out in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
             out[:] = getattr(self, name)[b, slots]
         logw[:] = self.logw[slots]
 
@@ -302,7 +303,7 @@ class NumpyParticleKernels:
                 continue
             slots = self.off[g] + np.arange(m_out)
             p = self.parent[slots]
-            for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq"):
+            for name in STATE:
                 arr = getattr(self, name)
                 arr[dst, slots] = arr[src, p]
             self.logw[slots] = 0.0
