@@ -138,7 +138,16 @@ class NumpySaliencyEngine:
         return out if details else {}
 
 
-SERIAL_PIXELS = 1 << 18  # up to this many pixels, serial loops beat a parallel launch on the CPU
+SERIAL_PIXELS = 1 << 21  # up to this many pixels, one thread beats a parallel launch on the (2-core) CPU
+CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
+
+
+def chunk_count(height: int, serial: bool, arch: str) -> int:
+    """Runs of rows the streamed max filters split the image into: one when serial, else
+    ⌈H / rows⌉ (long runs on the CPU, where halo rows cost; short ones on a GPU, for threads)."""
+    if serial:
+        return 1
+    return -(-height // CHUNK_ROWS["cpu" if arch == "cpu" else "gpu"])
 
 
 def lane_layout(width: int) -> tuple[int, np.ndarray]:
@@ -176,8 +185,11 @@ class TaichiSaliencyEngine:
         self.ks, self.grid, self.r = ks, grid, window
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_lanes, valid = lane_layout(self.shape[1])
-        self.serial = self.shape[0] * self.shape[1] <= SERIAL_PIXELS and backend.current().arch == "cpu"
-        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks), self._fields)
+        arch = backend.current().arch
+        self.serial = self.shape[0] * self.shape[1] <= SERIAL_PIXELS and arch == "cpu"
+        self.n_chunks = chunk_count(self.shape[0], self.serial, arch)
+        self.keep_i_se = False  # also store I_se (tests, figures)
+        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks), self._fields)
         f = self.f
         f.valid.from_numpy(valid)
         f.d.from_numpy(d)
@@ -198,7 +210,9 @@ class TaichiSaliencyEngine:
         image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, self.n_lanes))  # noqa: E731
         f = types.SimpleNamespace(valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes),
                                   ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
-        f.hs, f.hm, f.tmp, f.tmp2, f.acc2 = image(), image(), image(), image(), image()
+        rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.n_chunks, depth, self.n_lanes))  # noqa: E731
+        f.hs, f.hm, f.ring_max, f.line = rows(2 * self.r + 1), rows(2 * self.r + 1), rows(2 * self.r + 1), rows(1)
+        f.i_se, f.acc2 = image(), image()
         f.z_rows = ti.field(ti.f64, shape=(3, h, 2))
         f.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
         f.row_x = ti.field(ti.i32, shape=(h, w))
@@ -222,12 +236,13 @@ class TaichiSaliencyEngine:
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         ks = self.ks
         ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.f.ring["z"], slot, self.f.z_rows, self.serial)
-        ks.energy_collection_max(self.f.ring["z"], slot, self.f.valid, self.f.hs, self.f.hm, self.f.tmp, self.f.tmp2,
-                                 self.f.ring["se_max"], slot, self.r, self.serial)
+        ks.energy_collection_max(self.f.ring["z"], slot, self.f.valid, self.f.hs, self.f.hm, self.f.line,
+                                 self.f.ring_max, self.f.ring["se_max"], slot, self.n_chunks, self.r, self.f.i_se,
+                                 self.keep_i_se, self.serial)
 
     def first_layer(self, slots, scale: float, dst: int) -> None:
-        self.ks.accumulate_max(self.f.ring["se_max"], *slots, scale, self.f.valid, self.f.ring["acc"], dst, self.f.tmp,
-                               self.f.ring["acc_max"], self.r, self.serial)
+        self.ks.accumulate_max(self.f.ring["se_max"], *slots, scale, self.f.valid, self.f.ring["acc"], dst, self.f.line,
+                               self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
         ks = self.ks

@@ -7,7 +7,7 @@ import pytest
 import scipy.ndimage as ndi
 import taichi as ti
 
-from tbd_taichi import normalize, simulate
+from tbd_taichi import normalize, saliency, simulate
 from tbd_taichi.kernels import saliency as ks
 from tbd_taichi.numpy_kernels import saliency as nps
 from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
@@ -43,30 +43,48 @@ def random_image(rng, shape, kind):
 KINDS = ["normal", "extreme", "ties"]
 
 
+def chunk_rings(n_chunks, depth, blocks):
+    """Per-chunk row rings of the streamed kernels: (line, ring of ``depth`` rows)."""
+    return (ti.Vector.field(8, ti.f32, shape=(n_chunks, 1, blocks)),
+            ti.Vector.field(8, ti.f32, shape=(n_chunks, depth, blocks)))
+
+
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("r", [1, 2])
 def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
+    """The streamed max filter (accumulate_max with one slot, scale 1), in one chunk and in chunks
+    of 1–3 rows (more halo rows than chunk rows), against scipy, OpenCV and the twin."""
     serial = SHAPES.index(shape) % 2 == 0  # both loop modes, without compiling every case twice
+    n_chunks = 1 if serial else max(1, shape[0] // 2)
     src, valid, blocks = lane_ring(np.zeros(shape, np.float32))
-    tmp, dst = lane_out(shape, blocks), lane_out(shape, blocks)
+    acc, dst = lane_out(shape, blocks), lane_out(shape, blocks)
+    line, ring = chunk_rings(n_chunks, 2 * r + 1, blocks)
     size = 2 * r + 1
     for kind in KINDS:
         img = random_image(rng, shape, kind)
         src.from_numpy(to_lanes(img, blocks)[None])
-        ks.max_filter(src, 0, valid, tmp, dst, 0, r, serial)
+        ks.accumulate_max(src, 0, -1, -1, 1.0, valid, acc, 0, line, ring, dst, n_chunks, r, serial)
         got = from_lanes(dst.to_numpy()[0], shape[1])
+        np.testing.assert_array_equal(from_lanes(acc.to_numpy()[0], shape[1]), img)
         np.testing.assert_array_equal(got, ndi.maximum_filter(img, size=size, mode="nearest"))
         np.testing.assert_array_equal(got, cv2.dilate(img, np.ones((size, size), np.uint8)))
         np.testing.assert_array_equal(got, nps.max_filter(img, r))
 
 
 @pytest.mark.parametrize("shape", SHAPES)
-def test_energy_collection(rng, shape):
+@pytest.mark.parametrize("chunked", [False, True])
+def test_energy_collection(rng, shape, chunked, monkeypatch):
+    """I_se and I_se_max, streamed in one chunk or in chunks of 2 rows (parallel loop)."""
+    if chunked:
+        monkeypatch.setattr(saliency, "SERIAL_PIXELS", 0)
+        monkeypatch.setitem(saliency.CHUNK_ROWS, "cpu", 2)
     engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
+    assert engine.n_chunks == (-(-shape[0] // 2) if chunked else 1)
+    engine.keep_i_se = True
     for kind in KINDS:
         z = random_image(rng, shape, kind)
         engine.put_and_energy(1, z)
-        got = from_lanes(engine.f.tmp.to_numpy()[0], shape[1])  # I_se
+        got = from_lanes(engine.f.i_se.to_numpy()[0], shape[1])  # I_se
         np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
         se_max = from_lanes(engine.f.ring["se_max"].to_numpy()[1], shape[1])
         np.testing.assert_array_equal(se_max, nps.max_filter(got))
