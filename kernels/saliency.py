@@ -55,9 +55,18 @@ def row_vector(src: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32, valid: ti.t
 
 
 @ti.func
-def positive_row_vector(src: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32, valid: ti.template()) -> VEC:
-    """max(src, 0) at (s, y, xb), 0 outside the image."""
-    return ti.max(row_vector(src, s, y, xb, valid, 0.0), 0.0)
+def frame_vector(z: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32) -> VEC:
+    """z[s, y, xb] of a frame ring, 0 for xb outside the row (a frame's padding lanes hold 0)."""
+    v = VEC(0.0)
+    if 0 <= xb < z.shape[2]:
+        v = z[s, y, xb]
+    return v
+
+
+@ti.func
+def positive_row_vector(z: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32) -> VEC:
+    """max(z, 0) at (s, y, xb) of a frame ring, 0 outside the image."""
+    return ti.max(frame_vector(z, s, y, xb), 0.0)
 
 
 @ti.func
@@ -143,15 +152,15 @@ def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: t
 
 
 @ti.func
-def energy_row_pass(z: ti.template(), zs: ti.i32, y: ti.i32, valid: ti.template(), hs: ti.template(),
-                    hm: ti.template(), c: ti.i32, r: ti.template()):
+def energy_row_pass(z: ti.template(), zs: ti.i32, y: ti.i32, hs: ti.template(), hm: ti.template(), c: ti.i32,
+                    r: ti.template()):
     """Row pass of Eq. 21 for image row y: Σ and max of p = max(z, 0) over |dx| ≤ r, into slot
     y mod (2r+1) of chunk c's rings hs and hm."""
     slot = y % (2 * r + 1)
     prev = VEC(0.0)
-    cur = positive_row_vector(z, zs, y, 0, valid)
+    cur = positive_row_vector(z, zs, y, 0)
     for xb in range(z.shape[2]):
-        nxt = positive_row_vector(z, zs, y, xb + 1, valid)
+        nxt = positive_row_vector(z, zs, y, xb + 1)
         total = VEC(0.0)
         peak = VEC(0.0)
         for d in ti.static(range(-r, r + 1)):
@@ -196,7 +205,7 @@ def energy_collection_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs
         y0, y1 = chunk_rows(c, n_chunks, h)
         for y in range(y0 - 2 * r, y1 + 2 * r):
             if 0 <= y < h:
-                energy_row_pass(z, zs, y, valid, hs, hm, c, r)
+                energy_row_pass(z, zs, y, hs, hm, c, r)
             yb = y - r
             if 0 <= yb < h and y0 - r <= yb < y1 + r:
                 for xb in range(z.shape[2]):
@@ -287,15 +296,15 @@ def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32
 
 
 @ti.func
-def correlate_d(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), y: ti.i32, xb: ti.i32) -> VEC:
+def correlate_d(z: ti.template(), zs: ti.i32, d: ti.template(), y: ti.i32, xb: ti.i32) -> VEC:
     """(z ⋆ D) at the 8 pixels of (y, xb) over the 5×5 window, zero outside the image (Eq. 27's B·σ²);
     terms added in (dy, dx) row-major order, like the NumPy twin."""
     acc = VEC(0.0)
     for dy in ti.static(range(5)):
         if 0 <= y + dy - 2 < z.shape[1]:
-            prev = row_vector(z, zs, y + dy - 2, xb - 1, valid, 0.0)
-            cur = row_vector(z, zs, y + dy - 2, xb, valid, 0.0)
-            nxt = row_vector(z, zs, y + dy - 2, xb + 1, valid, 0.0)
+            prev = frame_vector(z, zs, y + dy - 2, xb - 1)
+            cur = frame_vector(z, zs, y + dy - 2, xb)
+            nxt = frame_vector(z, zs, y + dy - 2, xb + 1)
             for dx in ti.static(range(5)):
                 acc += d[dy, dx] * lane_shift(prev, cur, nxt, dx - 2)
     return acc
@@ -324,7 +333,7 @@ def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.templat
             keep = (ti.cast(acc2[0, y, xb], ti.f64) > threshold) & (acc[s, y, xb] == acc_max[s, y, xb]) & \
                 (valid[xb] > 0)
             if keep.any():
-                lw = lef_log_weight(correlate_d(z, s, valid, d, y, xb), a, i_min, i_max)
+                lw = lef_log_weight(correlate_d(z, s, d, y, xb), a, i_min, i_max)
                 for k in ti.static(range(LANES)):
                     if keep[k]:
                         row_x[y, n] = xb * LANES + k
@@ -365,7 +374,8 @@ def kth_largest(values: ti.template(), scratch: ti.template(), off: ti.i32, n: t
 
 
 @ti.kernel
-def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), block_id: ti.template(),
+def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
+                   col_block: ti.template(),
                    block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
                    entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
                    scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
@@ -389,7 +399,7 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
             for i in range(n_row[y]):
                 x = row_x[y, i]
                 lw = row_logw[y, i]
-                b = block_id[y, x]
+                b = row_base[y] + col_block[x]  # two small tables, not an (H, W) image: no cache misses
                 block_max[b] = ti.max(block_max[b], lw)
                 e = block_offset[b] + block_nnz[b]
                 entry_pixel[e] = y * w + x
@@ -434,15 +444,15 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
 # ---------------------------------------------------------------- single operators (tests, figures)
 
 @ti.kernel
-def lef_map(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), a: ti.f32, i_min: ti.f32,
+def lef_map(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, i_min: ti.f32,
             i_max: ti.f32, out: ti.template()):
     """Likelihood estimation filter (Eqs. 25–28) at every pixel of a lane ring: log ω̌_lef (σ = 1)."""
     for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
-        out[0, y, xb] = lef_log_weight(correlate_d(z, zs, valid, d, y, xb), a, i_min, i_max)
+        out[0, y, xb] = lef_log_weight(correlate_d(z, zs, d, y, xb), a, i_min, i_max)
 
 
 @ti.kernel
-def correlate_map(z: ti.template(), zs: ti.i32, valid: ti.template(), d: ti.template(), out: ti.template()):
+def correlate_map(z: ti.template(), zs: ti.i32, d: ti.template(), out: ti.template()):
     """z ⋆ D at every pixel of a lane ring (zero padding)."""
     for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
-        out[0, y, xb] = correlate_d(z, zs, valid, d, y, xb)
+        out[0, y, xb] = correlate_d(z, zs, d, y, xb)

@@ -45,6 +45,8 @@ class BlockGrid:
     n_bx: int
     offsets: np.ndarray  # (B,) int32 start of each block's slab (cumulative areas)
     areas: np.ndarray  # (B,) int32 pixels per block
+    row_base: np.ndarray  # (H,) int32 by·n_bx of each row: block_id[y, x] = row_base[y] + col_block[x]
+    col_block: np.ndarray  # (W,) int32 bx of each column
 
     @property
     def n_blocks(self) -> int:
@@ -62,7 +64,8 @@ def block_grid(shape, block_size: int) -> BlockGrid:
     block_id = (row_block[:, None] * n_bx + col_block[None, :]).astype(np.int32)
     areas = np.bincount(block_id.ravel(), minlength=n_by * n_bx).astype(np.int32)
     offsets = (np.cumsum(areas) - areas).astype(np.int32)
-    return BlockGrid(block_id, n_by, n_bx, offsets, areas)
+    return BlockGrid(block_id, n_by, n_bx, offsets, areas, (row_block * n_bx).astype(np.int32),
+                     col_block.astype(np.int32))
 
 
 def psf_matrix(psf_sigma: float = 0.7) -> np.ndarray:
@@ -193,7 +196,8 @@ class TaichiSaliencyEngine:
         f = self.f
         f.valid.from_numpy(valid)
         f.d.from_numpy(d)
-        f.block_id.from_numpy(grid.block_id)
+        f.row_base.from_numpy(grid.row_base)
+        f.col_block.from_numpy(grid.col_block)
         f.block_offset.from_numpy(grid.offsets)
         f.block_max.fill(ks.NEG_INF)
         f.proposal.fill(0)
@@ -220,7 +224,7 @@ class TaichiSaliencyEngine:
         f.n_row = ti.field(ti.i32, shape=h)
         f.stats = ti.field(ti.f64, shape=8)
         f.d = ti.field(ti.f32, shape=(5, 5))
-        f.block_id = ti.field(ti.i32, shape=(h, w))
+        f.row_base, f.col_block = ti.field(ti.i32, shape=h), ti.field(ti.i32, shape=w)
         f.block_offset, f.block_max = ti.field(ti.i32, shape=nb), ti.field(ti.f32, shape=nb)
         f.block_nnz, f.block_stats = ti.field(ti.i32, shape=nb), ti.field(ti.f64, shape=(nb, 4))
         f.proposal = ti.field(ti.f32, shape=(h, w))
@@ -250,7 +254,7 @@ class TaichiSaliencyEngine:
         ks.frame_statistics(self.f.acc2_rows, self.f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.f.stats)
         ks.segment_and_lef(self.f.acc2, self.f.ring["acc"], self.f.ring["acc_max"], slot, self.f.ring["z"], self.f.valid, self.f.d,
                            a, self.f.stats, self.f.row_x, self.f.row_logw, self.f.n_row, self.serial)
-        ks.block_proposal(self.f.row_x, self.f.row_logw, self.f.n_row, self.f.block_id, self.f.block_offset, self.f.block_nnz,
+        ks.block_proposal(self.f.row_x, self.f.row_logw, self.f.n_row, self.f.row_base, self.f.col_block, self.f.block_offset, self.f.block_nnz,
                           self.f.block_max, self.f.entry_pixel, self.f.entry_logw, self.f.entry_sal, self.f.scratch,
                           self.f.block_stats, self.f.proposal, self.f.written, self.f.n_written)
         if not details:

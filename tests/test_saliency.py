@@ -109,11 +109,11 @@ def test_energy_collection_where_the_maximum_is_not_positive():
 @pytest.mark.parametrize("shape", SHAPES)
 def test_correlation_against_scipy_and_cv2(rng, shape):
     z = random_image(rng, shape, "normal")
-    src, valid, blocks = lane_ring(z)
+    src, _, blocks = lane_ring(z)
     dst = lane_out(shape, blocks)
     dfield = ti.field(ti.f32, shape=(5, 5))
     dfield.from_numpy(D)
-    ks.correlate_map(src, 0, valid, dfield, dst)
+    ks.correlate_map(src, 0, dfield, dst)
     got = from_lanes(dst.to_numpy()[0], shape[1])
     np.testing.assert_array_equal(got, nps.correlate_d(z, D))
     ref = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")
@@ -126,11 +126,11 @@ def test_correlation_against_scipy_and_cv2(rng, shape):
 def test_lef_is_the_maximum_over_the_intensity_range(rng, snr):
     z = rng.standard_normal((20, 24)).astype(np.float32) * 2
     i_min, i_max = intensity_range(0.0, 1.0, snr)
-    src, valid, blocks = lane_ring(z)
+    src, _, blocks = lane_ring(z)
     dst = lane_out(z.shape, blocks)
     dfield = ti.field(ti.f32, shape=(5, 5))
     dfield.from_numpy(D)
-    ks.lef_map(src, 0, valid, dfield, A, i_min, i_max, dst)
+    ks.lef_map(src, 0, dfield, A, i_min, i_max, dst)
     got = from_lanes(dst.to_numpy()[0], z.shape[1])
     np.testing.assert_allclose(got, nps.lef_map(z, D, 1.0, A, i_min, i_max), rtol=1e-6, atol=1e-6)
     b = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")
