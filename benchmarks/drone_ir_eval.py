@@ -76,6 +76,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=None, help="first N frames of each clip (default all)")
     parser.add_argument("--gif", default="IR_DRONE_021", help="clip shown in docs/results/drone_ir.gif")
     args = parser.parse_args()
+    tbd.keep_freed_memory()  # large per-frame temporaries reuse the heap (see backend.keep_freed_memory)
     tbd.init("cpu")
     data, out_dir = Path(args.data), ROOT / "docs" / "results"
     rows = []

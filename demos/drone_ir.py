@@ -27,6 +27,7 @@ def main() -> None:
     args = parser.parse_args()
     clip, out = Path(args.clip), Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    tbd.keep_freed_memory()  # glibc: reuse freed frame-sized buffers instead of page-faulting new ones
     frames = io.read_frames(clip)[:args.frames]
     tracker = tbd.SGDSPF(frames.shape[1:], **REAL_VIDEO)  # real video needs background suppression
     for frame in frames:

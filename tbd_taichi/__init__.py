@@ -12,7 +12,7 @@ Coordinates: x = column, y = row, 0-based, pixel centres at integers; frames are
 0-based indices into the input.
 """
 from . import io, metrics, normalize, tables
-from .backend import available_archs, init
+from .backend import available_archs, init, keep_freed_memory
 from .errors import BackendError, InputError, ParameterError, TBDError
 from .normalize import normalise_frame
 from .params import SGDSParams
@@ -24,6 +24,6 @@ __version__ = "0.1.0"
 
 __all__ = [
     "BackendError", "InputError", "OriginalPF", "ParameterError", "SGDSPF", "SGDSParams", "Scenario", "TBDError",
-    "available_archs", "init", "track",
+    "available_archs", "init", "keep_freed_memory", "track",
     "io", "metrics", "normalise_frame", "normalize", "simulate", "tables", "__version__",
 ]

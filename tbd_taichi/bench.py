@@ -21,7 +21,6 @@ after the engine's run (it includes everything measured before it in the same pr
 """
 from __future__ import annotations
 
-import ctypes
 import functools
 import os
 import platform
@@ -133,25 +132,10 @@ def peak_rss_mib() -> float:
     return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB on Linux
 
 
-def keep_freed_memory() -> bool:
-    """Ask glibc to keep freed blocks up to 32 MiB in the heap (M_MMAP_THRESHOLD, M_TRIM_THRESHOLD).
-
-    By default every large NumPy temporary is a fresh mmap, so each call pays page faults for
-    memory it has just returned (measured: the NumPy saliency stage at 1024×1024 takes 57 ms
-    with them, 37 ms without); timing that would flatter the Taichi/NumPy ratio.  No-op (False)
-    where the C library is not glibc."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return False
-    m_trim_threshold, m_mmap_threshold = -1, -3
-    return bool(libc.mallopt(m_mmap_threshold, 32 << 20)) and bool(libc.mallopt(m_trim_threshold, 1 << 30))
-
-
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result."""
-    keep_freed_memory()
+    backend.keep_freed_memory()
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,

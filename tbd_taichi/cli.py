@@ -280,6 +280,7 @@ def main(argv=None) -> int:
     if getattr(args, "frames", 1) is not None and getattr(args, "frames", 1) < 1:
         parser.error("--frames must be ≥ 1")
     try:
+        backend.keep_freed_memory()
         backend.init(args.arch, threads=args.threads)
         return args.func(args)
     except TBDError as exc:

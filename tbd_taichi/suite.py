@@ -95,6 +95,7 @@ def run_one(run: Run) -> dict:
 def _init_worker(arch: str, threads: int | None) -> None:
     from . import backend
 
+    backend.keep_freed_memory()
     backend.init(arch, threads=threads)
 
 
