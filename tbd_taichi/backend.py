@@ -159,3 +159,13 @@ def keep_freed_memory() -> bool:
         return False
     m_trim_threshold, m_mmap_threshold = -1, -3
     return bool(libc.mallopt(m_mmap_threshold, 32 << 20)) and bool(libc.mallopt(m_trim_threshold, 1 << 30))
+
+
+SERIAL_PIXELS = 1 << 21  # up to this many pixels, one thread beats a parallel launch on the (2-core) CPU
+
+
+def serial_loops(pixels: int) -> bool:
+    """Whether image kernels should run their loops on one thread: on the CPU, for images of at most
+    SERIAL_PIXELS (there a parallel launch's dispatch costs more than the work it splits)."""
+    cfg = current()
+    return cfg is not None and cfg.arch == "cpu" and pixels <= SERIAL_PIXELS

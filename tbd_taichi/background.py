@@ -82,6 +82,7 @@ class Preprocessor:
         else:
             raise ParameterError(f"engine must be 'taichi' or 'numpy', got {engine!r}")
         self.k, self.shape = k, (int(shape[0]), int(shape[1]))
+        self.serial = engine == "taichi" and backend.serial_loops(self.shape[0] * self.shape[1])
         self.background, self.bad_pixels = background, bool(bad_pixels)
         new = lambda: np.zeros(self.shape, np.float32)  # noqa: E731
         self.residual, self.tmp, self.sum_a, self.sum_b = new(), new(), new(), new()
@@ -106,14 +107,14 @@ class Preprocessor:
         self.n_frames += 1
         if self.bad_pixels:
             out = np.empty_like(z)
-            self.k.isolated_spikes(z, self.spike_rate, SPIKE_RHO, SPIKE_Z, SPIKE_RATIO, SPIKE_RATE, out)
+            self.k.isolated_spikes(z, self.spike_rate, SPIKE_RHO, SPIKE_Z, SPIKE_RATIO, SPIKE_RATE, out, self.serial)
             z = out
         return z
 
     def box_sum(self, src: np.ndarray, dst: np.ndarray, r: int) -> None:
         """(2r+1)² box sum with replicated borders (separable: rows, then columns)."""
-        self.k.box_sum_rows(src, self.tmp, r)
-        self.k.box_sum_cols(self.tmp, dst, r)
+        self.k.box_sum_rows(src, self.tmp, r, self.serial)
+        self.k.box_sum_cols(self.tmp, dst, r, self.serial)
 
     def residual_of(self, x: np.ndarray) -> np.ndarray:
         """frame − background (raw units) for the mean, spatial and temporal backgrounds."""
@@ -124,14 +125,14 @@ class Preprocessor:
             self.box_sum(x, self.sum_a, OUTER_RADIUS)
             self.box_sum(x, self.sum_b, GUARD_RADIUS)
             self.k.hollow_residual(x, self.sum_a, self.sum_b, float((2 * OUTER_RADIUS + 1) ** 2),
-                                   float((2 * GUARD_RADIUS + 1) ** 2), r)
+                                   float((2 * GUARD_RADIUS + 1) ** 2), r, self.serial)
         else:
-            self.k.running_residual(x, self.temporal_bg, TEMPORAL_ALPHA, int(self.n_frames == 0), r)
+            self.k.running_residual(x, self.temporal_bg, TEMPORAL_ALPHA, int(self.n_frames == 0), r, self.serial)
         return r
 
     def mean_abs_difference(self, a: np.ndarray, b: np.ndarray) -> float:
         """mean |a − b| over the image (f64 row sums, added in row order: deterministic)."""
-        self.k.row_abs_difference_sums(a, b, self.row_sums)
+        self.k.row_abs_difference_sums(a, b, self.row_sums, self.serial)
         return float(self.row_sums.sum()) / a.size
 
     def is_global_change(self, s: np.ndarray) -> bool:
@@ -149,10 +150,10 @@ class Preprocessor:
         1/ST_ALPHA frames); re-based after a global change (module notes)."""
         t = self.n_frames
         if t > 0 and self.is_global_change(s):
-            self.k.rebase_background(s, self.prev_r, self.st_bg)
+            self.k.rebase_background(s, self.prev_r, self.st_bg, self.serial)
             self.global_changes.append(t)
         r = self.prev_r  # read by the re-base above; now this frame's residual
-        self.k.running_residual(s, self.st_bg, max(ST_ALPHA, 1.0 / (t + 1)), int(t == 0), r)
+        self.k.running_residual(s, self.st_bg, max(ST_ALPHA, 1.0 / (t + 1)), int(t == 0), r, self.serial)
         np.copyto(self.prev_s, s)
         return r
 
@@ -163,7 +164,8 @@ class Preprocessor:
         r = self.moving_residual(s)
         t = self.n_frames
         abs_sum = self.local_abs_sum(r, NOISE_CLIP * sigma_s)
-        self.k.running_residual(abs_sum, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)), int(t == 0), self.tmp)
+        self.k.running_residual(abs_sum, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)), int(t == 0), self.tmp,
+                                self.serial)
         return self.over_local_sigma(r, self.st_noise, ST_FLOOR * sigma_s)
 
     def standardised(self, r: np.ndarray) -> np.ndarray:
@@ -173,7 +175,7 @@ class Preprocessor:
 
     def local_abs_sum(self, r: np.ndarray, clip: float) -> np.ndarray:
         """Σ of min(|r|, clip) over the (2·NOISE_RADIUS + 1)² window around each pixel (in sum_b)."""
-        self.k.clipped_abs(r, clip, self.sum_a)
+        self.k.clipped_abs(r, clip, self.sum_a, self.serial)
         self.box_sum(self.sum_a, self.sum_b, NOISE_RADIUS)
         return self.sum_b
 
@@ -181,7 +183,7 @@ class Preprocessor:
         """z = r / max(√(π/2)·abs_sum/window, floor): the residual over its local σ (a new array:
         callers keep recent frames)."""
         z = np.empty(self.shape, np.float32)
-        self.k.standardise(r, abs_sum, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, floor, z)
+        self.k.standardise(r, abs_sum, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, floor, z, self.serial)
         return z
 
     def bad_pixel_map(self) -> np.ndarray:

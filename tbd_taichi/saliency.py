@@ -141,7 +141,7 @@ class NumpySaliencyEngine:
         return out if details else {}
 
 
-SERIAL_PIXELS = 1 << 21  # up to this many pixels, one thread beats a parallel launch on the (2-core) CPU
+SERIAL_PIXELS = backend.SERIAL_PIXELS  # one thread up to this many pixels (tests lower it)
 CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
 
 

@@ -22,11 +22,12 @@ def images(rng, shape):
 
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("r", [1, 5, 7])
-def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r):
+@pytest.mark.parametrize("serial", [False, True])
+def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r, serial):
     for x in images(rng, shape):
         tmp, got, ref = np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
-        kb.box_sum_rows(x, tmp, r)
-        kb.box_sum_cols(tmp, got, r)
+        kb.box_sum_rows(x, tmp, r, serial)
+        kb.box_sum_cols(tmp, got, r, serial)
         nb.box_sum_rows(x, tmp, r)
         nb.box_sum_cols(tmp, ref, r)
         scale = np.abs(x).max() * (2 * r + 1) ** 2
@@ -39,28 +40,30 @@ def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r):
 
 
 @pytest.mark.parametrize("shape", SHAPES)
-def test_elementwise_kernels_match_twins(rng, shape):
+@pytest.mark.parametrize("serial", [False, True])
+def test_elementwise_kernels_match_twins(rng, shape, serial):
+    """Both loop modes of every per-pixel kernel against its twin."""
     x, a, b = (rng.standard_normal(shape).astype(np.float32) * 5 for _ in range(3))
     for name, args in [("hollow_residual", (x, a, b, 121.0, 25.0)), ("clipped_abs", (x, 2.5)),
                        ("standardise", (x, np.abs(a), 225.0, 1.2533, 0.1))]:
         got, ref = np.zeros_like(x), np.zeros_like(x)
-        getattr(kb, name)(*args, got)
+        getattr(kb, name)(*args, got, serial)
         getattr(nb, name)(*args, ref)
         np.testing.assert_allclose(got, ref, rtol=F32_RTOL, atol=1e-6, err_msg=name)
     got, ref = np.zeros_like(x), np.zeros_like(x)
-    kb.rebase_background(x, a, got)
+    kb.rebase_background(x, a, got, serial)
     nb.rebase_background(x, a, ref)
     np.testing.assert_array_equal(got, ref)
     rows_t, rows_n = np.zeros(shape[0]), np.zeros(shape[0])
     big = x * np.float32(1e4)  # f64 sums of f32 inputs: exact up to f64 rounding, whatever the order
-    kb.row_abs_difference_sums(big, a, rows_t)
+    kb.row_abs_difference_sums(big, a, rows_t, serial)
     nb.row_abs_difference_sums(big, a, rows_n)
     np.testing.assert_allclose(rows_t, rows_n, rtol=1e-12)
     np.testing.assert_allclose(rows_t, np.abs(big.astype(np.float64) - a).sum(axis=1), rtol=1e-12)
     bg_t, bg_n = np.zeros_like(x), np.zeros_like(x)
     for first, frame in enumerate([x, a, b][::-1]):
         got, ref = np.zeros_like(x), np.zeros_like(x)
-        kb.running_residual(frame, bg_t, 0.05, int(first == 0), got)
+        kb.running_residual(frame, bg_t, 0.05, int(first == 0), got, serial)
         nb.running_residual(frame, bg_n, 0.05, int(first == 0), ref)
         np.testing.assert_allclose(got, ref, rtol=F32_RTOL, atol=1e-5)
         np.testing.assert_allclose(bg_t, bg_n, rtol=F32_RTOL, atol=1e-5)
