@@ -42,11 +42,29 @@ def box_sum_rows(src: F2, dst: F2, r: ti.i32, serial: ti.template()):
 
 
 @ti.kernel
-def box_sum_cols(src: F2, dst: F2, r: ti.i32, serial: ti.template()):
-    """dst[i, j] = Σ_{|d| ≤ r} src[clamp(i + d), j]: the column pass of the separable box sum."""
-    ti.loop_config(serialize=serial)
-    for j in range(src.shape[1]):
-        running_box_sum(src, dst, r, j, False)
+def box_sum_cols(src: F2, dst: F2, r: ti.i32, acc: ti.types.ndarray(dtype=ti.f64, ndim=1), serial: ti.template()):
+    """dst[i, j] = Σ_{|d| ≤ r} src[clamp(i + d), j]: the column pass of the separable box sum.
+
+    Parallel: one running sum per column.  Serial: the same running sums, one per column in
+    ``acc`` (f64, W), advanced a row at a time, so memory is read row by row (the same additions
+    in the same order: the same bits)."""
+    h, w = src.shape[0], src.shape[1]
+    if ti.static(serial):
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            for j in range(w):
+                acc[j] = ti.f64(0.0)
+            for d in range(-r, r + 1):
+                for j in range(w):
+                    acc[j] += ti.f64(src[ti.max(ti.min(d, h - 1), 0), j])
+            for k in range(h):
+                lo, hi = ti.max(k - r, 0), ti.min(k + r + 1, h - 1)
+                for j in range(w):
+                    dst[k, j] = ti.cast(acc[j], ti.f32)
+                    acc[j] += ti.f64(src[hi, j]) - ti.f64(src[lo, j])
+    else:
+        for j in range(w):
+            running_box_sum(src, dst, r, j, False)
 
 
 @ti.kernel

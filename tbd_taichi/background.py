@@ -87,6 +87,7 @@ class Preprocessor:
         new = lambda: np.zeros(self.shape, np.float32)  # noqa: E731
         self.residual, self.tmp, self.sum_a, self.sum_b = new(), new(), new(), new()
         self.temporal_bg, self.spike_rate = new(), new()
+        self.column_sums = np.zeros(self.shape[1], np.float64)  # running column sums of the box filter
         if background == "spatiotemporal":
             self.st_bg, self.st_noise, self.prev_s, self.prev_r, self.zeros = new(), new(), new(), new(), new()
             self.row_sums = np.zeros(self.shape[0], np.float64)
@@ -114,7 +115,7 @@ class Preprocessor:
     def box_sum(self, src: np.ndarray, dst: np.ndarray, r: int) -> None:
         """(2r+1)² box sum with replicated borders (separable: rows, then columns)."""
         self.k.box_sum_rows(src, self.tmp, r, self.serial)
-        self.k.box_sum_cols(self.tmp, dst, r, self.serial)
+        self.k.box_sum_cols(self.tmp, dst, r, self.column_sums, self.serial)
 
     def residual_of(self, x: np.ndarray) -> np.ndarray:
         """frame − background (raw units) for the mean, spatial and temporal backgrounds."""

@@ -27,7 +27,10 @@ def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r, serial):
     for x in images(rng, shape):
         tmp, got, ref = np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
         kb.box_sum_rows(x, tmp, r, serial)
-        kb.box_sum_cols(tmp, got, r, serial)
+        kb.box_sum_cols(tmp, got, r, np.zeros(shape[1]), serial)
+        other = np.zeros_like(x)  # the other loop mode: the same additions in the same order
+        kb.box_sum_cols(tmp, other, r, np.zeros(shape[1]), not serial)
+        np.testing.assert_array_equal(other, got)
         nb.box_sum_rows(x, tmp, r)
         nb.box_sum_cols(tmp, ref, r)
         scale = np.abs(x).max() * (2 * r + 1) ** 2

@@ -20,7 +20,7 @@ def box_sum_rows(src: np.ndarray, dst: np.ndarray, r: int, serial: bool = False)
     _box_sum_axis(src, dst, r, 1)
 
 
-def box_sum_cols(src: np.ndarray, dst: np.ndarray, r: int, serial: bool = False) -> None:
+def box_sum_cols(src: np.ndarray, dst: np.ndarray, r: int, acc=None, serial: bool = False) -> None:
     _box_sum_axis(src, dst, r, 0)
 
 
