@@ -130,6 +130,20 @@ def lane_sum(v: VEC64) -> ti.f64:
     return total
 
 
+@ti.func
+def add_lane_moments(v: VEC, s1: VEC64, s2: VEC64):
+    """(s1 + v, s2 + v²) in f64, one accumulator per lane (8 independent chains of additions)."""
+    w = ti.cast(v, ti.f64)
+    return s1 + w, s2 + w * w
+
+
+@ti.func
+def store_row_moments(rows: ti.template(), s: ti.i32, y: ti.i32, s1: VEC64, s2: VEC64):
+    """rows[s, y] = (Σ v, Σ v²) of a row from its per-lane sums, lanes added left to right."""
+    rows[s, y, 0] = lane_sum(s1)
+    rows[s, y, 1] = lane_sum(s2)
+
+
 # ---------------------------------------------------------------- pipeline kernels
 
 @ti.kernel
@@ -139,16 +153,13 @@ def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: t
     (Σ z, Σ z²) in f64 (for Eq. 26), summed per lane, then over the lanes."""
     ti.loop_config(serialize=serial, block_dim=ROW_BLOCK)
     for y in range(src.shape[0]):
-        s1 = VEC64(0.0)  # one f64 accumulator per lane: 8 independent chains of additions
+        s1 = VEC64(0.0)
         s2 = VEC64(0.0)
         for xb in range(src.shape[1]):
             v = src[y, xb]
             z[zs, y, xb] = v
-            w = ti.cast(v, ti.f64)
-            s1 += w
-            s2 += w * w
-        z_rows[zs, y, 0] = lane_sum(s1)
-        z_rows[zs, y, 1] = lane_sum(s2)
+            s1, s2 = add_lane_moments(v, s1, s2)
+        store_row_moments(z_rows, zs, y, s1, s2)
 
 
 @ti.func
@@ -255,11 +266,8 @@ def accumulate_moments(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scal
         for xb in range(src.shape[2]):
             v = sum_of_slots(src, a, b, c, y, xb) * scale
             dst[0, y, xb] = v
-            w = ti.cast(v, ti.f64)
-            s1 += w
-            s2 += w * w
-        rows[0, y, 0] = lane_sum(s1)
-        rows[0, y, 1] = lane_sum(s2)
+            s1, s2 = add_lane_moments(v, s1, s2)
+        store_row_moments(rows, 0, y, s1, s2)
 
 
 @ti.func
