@@ -141,7 +141,6 @@ class NumpySaliencyEngine:
         return out if details else {}
 
 
-SERIAL_PIXELS = backend.SERIAL_PIXELS  # one thread up to this many pixels (tests lower it)
 CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
 
 
@@ -188,9 +187,8 @@ class TaichiSaliencyEngine:
         self.ks, self.grid, self.r = ks, grid, window
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_lanes, valid = lane_layout(self.shape[1])
-        arch = backend.current().arch
-        self.serial = self.shape[0] * self.shape[1] <= SERIAL_PIXELS and arch == "cpu"
-        self.n_chunks = chunk_count(self.shape[0], self.serial, arch)
+        self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
+        self.n_chunks = chunk_count(self.shape[0], self.serial, backend.current().arch)
         self.keep_i_se = False  # also store I_se (tests, figures)
         self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks), self._fields)
         f = self.f

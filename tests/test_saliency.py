@@ -7,7 +7,7 @@ import pytest
 import scipy.ndimage as ndi
 import taichi as ti
 
-from tbd_taichi import normalize, saliency, simulate
+from tbd_taichi import backend, normalize, saliency, simulate
 from tbd_taichi.kernels import saliency as ks
 from tbd_taichi.numpy_kernels import saliency as nps
 from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
@@ -76,7 +76,7 @@ def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
 def test_energy_collection(rng, shape, chunked, monkeypatch):
     """I_se and I_se_max, streamed in one chunk or in chunks of 2 rows (parallel loop)."""
     if chunked:
-        monkeypatch.setattr(saliency, "SERIAL_PIXELS", 0)
+        monkeypatch.setattr(backend, "SERIAL_PIXELS", 0)
         monkeypatch.setitem(saliency.CHUNK_ROWS, "cpu", 2)
     engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
     assert engine.n_chunks == (-(-shape[0] // 2) if chunked else 1)
