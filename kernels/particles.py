@@ -15,7 +15,7 @@ import math
 
 import taichi as ti
 
-from .rng import key_prefix, normal_pair, uniform_at, uniform_f64_at
+from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 TILE = 1024
 PAD = 4  # zero border of the weights' frame: a 5×5 window (Eq. 15) that touches the image stays inside it
@@ -26,8 +26,9 @@ TWO_PI = 2.0 * math.pi
 S_EXIST, S_BIRTH_X, S_BIRTH_Y, S_BIRTH_SPEED, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_PIXEL = range(1, 8)
 S_BIRTH_MU, S_COPY = 20, 21
 COPY_TRIES = 16  # draws of a random slot to find an E = 1 particle to copy
-S_NOISE_XY, S_NOISE_V, S_NOISE_I, S_RESAMPLE = range(8, 12)
-S_RESAMPLE_END = 22
+S_NOISE_X, S_NOISE_VX, S_NOISE_I, S_RESAMPLE = range(8, 12)
+S_RESAMPLE_END, S_NOISE_Y, S_NOISE_VY = 22, 23, 24
+NOISE_STREAMS = (S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I)  # n1 … n5 of ``propagate``
 
 # per-group sums of ``moments`` (f64)
 M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
@@ -78,6 +79,7 @@ class ParticleKernels:
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.label = i32(*frame_shape)
+        self.normal = NormalTables()
 
     # ------------------------------------------------------------ helpers
 
@@ -209,15 +211,14 @@ class ParticleKernels:
         c21 = ti.sqrt(q1) * ti.f32(0.8660254037844386)
         c22 = ti.sqrt(q1) * ti.f32(0.5)
         sq2 = ti.sqrt(q2)
-        kxy, kv, ki = key_prefix(seed, frame, S_NOISE_XY), key_prefix(seed, frame, S_NOISE_V), \
-            key_prefix(seed, frame, S_NOISE_I)
+        keys = ti.Vector([key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)], dt=ti.u32)
+        w, k, phi = ti.static(self.normal.w, self.normal.k, self.normal.phi)
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i) and self.e[b, i] == 1 and (self.born[i] == 0 or self.kind[self.slot_group[i]] == 2):
-                p13 = normal_pair(kxy, i)
-                p24 = normal_pair(kv, i)
-                n1, n3, n2, n4 = p13[0], p13[1], p24[0], p24[1]
-                n5 = normal_pair(ki, i)[0]
+                n1, n2 = normal_at(w, k, phi, keys[0], i), normal_at(w, k, phi, keys[1], i)
+                n3, n4 = normal_at(w, k, phi, keys[2], i), normal_at(w, k, phi, keys[3], i)
+                n5 = normal_at(w, k, phi, keys[4], i)
                 x = self.x[b, i] + self.vx[b, i] + c11 * n1
                 y = self.y[b, i] + self.vy[b, i] + c11 * n3
                 self.x[b, i] = x

@@ -9,15 +9,51 @@ round per key word plus a final round; only 32-bit unsigned operations are used,
 every backend (CPU, CUDA, Vulkan, Metal) gives the same bits.  The NumPy twin is
 ``tbd_taichi.numpy_kernels.rng``.
 """
+import math
+
+import numpy as np
 import taichi as ti
 
 GOLDEN = 0x9E3779B9
 MIX1 = 0x7FEB352D
 MIX2 = 0x846CA68B
-TWO_PI = 6.283185307179586
 INV_2_24 = 1.0 / 16777216.0
 INV_2_53 = 1.0 / 9007199254740992.0
-POLAR_TRIES = 32  # attempts of the polar method per normal pair
+ZIG_LAYERS = 128  # ziggurat for N(0, 1), Marsaglia & Tsang (2000): 128 layers of equal area ZIG_V
+ZIG_R = 3.442619855899  # x_1, where the tail begins
+ZIG_V = 9.91256303526217e-3
+ZIG_TRIES = 32  # hashes one normal may use (accepts at the first with probability 0.988)
+
+
+def ziggurat_layers() -> tuple[np.ndarray, np.ndarray]:
+    """Layer edges x_0 = V/φ(R) > x_1 = R > … > x_127 > x_128 = 0 and φ_i = exp(−x_i²/2) (f64).
+    Layer i ≥ 1 is the box [0, x_i] × [φ_i, φ_{i+1}] of area V; layer 0 is [0, R] × [0, φ(R)] plus the tail."""
+    x = np.zeros(ZIG_LAYERS + 1)
+    x[0], x[1] = ZIG_V / math.exp(-0.5 * ZIG_R * ZIG_R), ZIG_R
+    for i in range(1, ZIG_LAYERS - 1):
+        x[i + 1] = math.sqrt(-2.0 * math.log(ZIG_V / x[i] + math.exp(-0.5 * x[i] * x[i])))
+    return x, np.exp(-0.5 * x * x)
+
+
+def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(w, k, phi): layer widths x_i as f32, the 23-bit fast-accept bounds k_i (m < k_i ⇒ u·x_i < x_{i+1}
+    for u = (2m + 1)·2^-24) and φ_0…φ_128 in f64."""
+    x, phi = ziggurat_layers()
+    k = np.clip(np.floor(2.0 ** 23 * x[1:] / x[:-1] - 0.5), 0, None).astype(np.uint32)
+    return x[:-1].astype(np.float32), k, phi
+
+
+@ti.data_oriented
+class NormalTables:
+    """The ziggurat tables as fields (build after ``ti.init``); pass ``w, k, phi`` to :func:`normal_at`."""
+
+    def __init__(self):
+        w, k, phi = ziggurat_tables()
+        self.w, self.k, self.phi = ti.field(ti.f32, ZIG_LAYERS), ti.field(ti.u32, ZIG_LAYERS), \
+            ti.field(ti.f64, ZIG_LAYERS + 1)
+        self.w.from_numpy(w)
+        self.k.from_numpy(k)
+        self.phi.from_numpy(phi)
 
 
 @ti.func
@@ -86,28 +122,60 @@ def uniform_f64_at(prefix: ti.u32, index) -> ti.f64:
 
 
 @ti.func
-def normal_pair(prefix: ti.u32, index) -> ti.types.vector(2, ti.f32):
-    """Two independent N(0, 1) variates for the key with this prefix: Marsaglia's polar method.
+def zig_signed(h: ti.u32, x: ti.f32) -> ti.f32:
+    """x with the sign of bit 7 of the draw."""
+    return ti.select((h & ti.u32(128)) != 0, -x, x)
 
-    Attempt k (k < POLAR_TRIES) hashes index·POLAR_TRIES + k into v1, v2 ~ U(−1, 1) and is kept if
-    s = v1² + v2² < 1; the pair is v·√(−2 ln s / s).  One log and one square root, no sine or
-    cosine (faster than Box–Muller on the CPU).  If every attempt fails (probability
-    (1 − π/4)^32 ≈ 4e-22) the last one is used through Box–Muller."""
-    out = ti.Vector([0.0, 0.0], dt=ti.f32)
-    base = ti.cast(index, ti.u32) * ti.u32(POLAR_TRIES)
-    for k in range(POLAR_TRIES):
-        h = hash_index(prefix, base + ti.cast(k, ti.u32))
-        u1 = unit_from_bits(h)
-        u2 = unit_from_bits(lowbias32(h + ti.u32(GOLDEN)))
-        v1, v2 = ti.f32(2.0) * u1 - ti.f32(1.0), ti.f32(2.0) * u2 - ti.f32(1.0)
-        s = v1 * v1 + v2 * v2
-        if s < ti.f32(1.0):
-            f = ti.sqrt(ti.f32(-2.0) * ti.log(s) / s)
-            out = ti.Vector([v1 * f, v2 * f], dt=ti.f32)
+
+@ti.func
+def normal_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti.u32, index) -> ti.f32:
+    """One N(0, 1) variate for the key with this prefix by the ziggurat (Marsaglia & Tsang 2000).
+
+    Draw d hashes index·ZIG_TRIES + d: bits 0–6 pick layer i, bit 7 the sign, bits 9–31 the
+    position u = (2m + 1)·2^-24 and x = u·x_i.  Accept at once if m < k_i (x under the curve: 98.8 %);
+    the rest goes to :func:`normal_rejection`.  One hash and a table lookup for most variates."""
+    base = ti.cast(index, ti.u32) * ti.u32(ZIG_TRIES)
+    h = hash_index(prefix, base)
+    i = ti.cast(h & ti.u32(ZIG_LAYERS - 1), ti.i32)
+    out = zig_signed(h, unit_from_bits(h) * w[i])
+    if (h >> 9) >= k[i]:
+        out = normal_rejection(w, k, phi, prefix, base, h)
+    return out
+
+
+@ti.func
+def normal_rejection(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti.u32, base: ti.u32,
+                     h0: ti.u32) -> ti.f32:
+    """The ziggurat's slow path, from the rejected fast draw h0 on: in layer i ≥ 1 accept x if
+    φ_i + U·(φ_{i+1} − φ_i) < exp(−x²/2) (f64), U from a second hash of the draw; in layer 0 switch to
+    Marsaglia's tail, x = R − ln(U1)/R, kept if −2 ln U2 > (x − R)², until it accepts; otherwise a
+    new draw.  After ZIG_TRIES draws (probability < 1e-50) the last x is used."""
+    out = ti.f32(0.0)
+    tail = False
+    h = h0
+    for d in range(ZIG_TRIES):
+        if d > 0:
+            h = hash_index(prefix, base + ti.cast(d, ti.u32))
+        u2 = ti.cast(unit_from_bits(lowbias32(h + ti.u32(GOLDEN))), ti.f64)
+        accept = False
+        x = ti.f32(0.0)
+        if not tail:
+            i = ti.cast(h & ti.u32(ZIG_LAYERS - 1), ti.i32)
+            x = unit_from_bits(h) * w[i]
+            if (h >> 9) < k[i]:
+                accept = True
+            elif i == 0:
+                tail = True
+            else:
+                x64 = ti.cast(x, ti.f64)
+                accept = phi[i] + u2 * (phi[i + 1] - phi[i]) < ti.exp(ti.f64(-0.5) * x64 * x64)
+        else:
+            xt = -ti.log(ti.cast(unit_from_bits(h), ti.f64)) / ti.f64(ZIG_R)
+            x = ti.cast(ti.f64(ZIG_R) + xt, ti.f32)
+            accept = ti.f64(-2.0) * ti.log(u2) > xt * xt
+        out = zig_signed(h, x)
+        if accept:
             break
-        if k == POLAR_TRIES - 1:
-            r = ti.sqrt(ti.f32(-2.0) * ti.log(u1))
-            out = ti.Vector([r * ti.cos(ti.f32(TWO_PI) * u2), r * ti.sin(ti.f32(TWO_PI) * u2)], dt=ti.f32)
     return out
 
 
@@ -134,11 +202,9 @@ def fill_uniform_f64(out: ti.types.ndarray(dtype=ti.f64, ndim=1), seed: ti.u32, 
 
 
 @ti.kernel
-def fill_normal_pair(out1: ti.types.ndarray(dtype=ti.f32, ndim=1), out2: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                     seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
-    """(out1[i], out2[i]) = normal_pair(key_prefix(seed, frame, stream), offset + i)."""
+def fill_normal(out: ti.types.ndarray(dtype=ti.f32, ndim=1), w: ti.template(), k: ti.template(), phi: ti.template(),
+                seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
+    """out[i] = normal_at(tables, key_prefix(seed, frame, stream), offset + i)."""
     key = key_prefix(seed, frame, stream)
-    for i in range(out1.shape[0]):
-        p = normal_pair(key, offset + ti.cast(i, ti.u32))
-        out1[i] = p[0]
-        out2[i] = p[1]
+    for i in range(out.shape[0]):
+        out[i] = normal_at(w, k, phi, key, offset + ti.cast(i, ti.u32))

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
-                                  S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, S_NOISE_I,
-                                  S_NOISE_V, S_NOISE_XY, S_RESAMPLE, S_RESAMPLE_END, TILE, TWO_PI)
+                                  S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, NOISE_STREAMS,
+                                  S_RESAMPLE, S_RESAMPLE_END, TILE, TWO_PI)
 from ..particles import STATE
 from . import rng
 
@@ -143,9 +143,7 @@ class NumpyParticleKernels:
         c11, c21, c22 = np.sqrt(q1 / F32(3.0)), np.sqrt(q1) * F32(0.8660254037844386), np.sqrt(q1) * F32(0.5)
         i = self.live_slots()
         i = i[(self.e[b, i] == 1) & ((self.born[i] == 0) | (self.kind[self.slot_group[i]] == 2))]
-        n1, n3 = rng.normal_pair(seed, frame, S_NOISE_XY, i)
-        n2, n4 = rng.normal_pair(seed, frame, S_NOISE_V, i)
-        n5 = rng.normal_pair(seed, frame, S_NOISE_I, i)[0]
+        n1, n2, n3, n4, n5 = (rng.normal(seed, frame, stream, i) for stream in NOISE_STREAMS)
         x = self.x[b, i] + self.vx[b, i] + c11 * n1
         y = self.y[b, i] + self.vy[b, i] + c11 * n3
         self.x[b, i], self.y[b, i] = x, y

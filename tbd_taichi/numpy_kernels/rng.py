@@ -1,9 +1,11 @@
 """NumPy twin of ``tbd_taichi.kernels.rng``: the same bits for the same keys."""
 import numpy as np
 
-from ..kernels.rng import GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, POLAR_TRIES, TWO_PI
+from ..kernels.rng import (GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, ZIG_LAYERS, ZIG_R, ZIG_TRIES,
+                           ziggurat_tables)
 
 _U32 = np.uint32
+ZIG_W, ZIG_K, ZIG_PHI = ziggurat_tables()
 
 
 def lowbias32(x: np.ndarray) -> np.ndarray:
@@ -53,27 +55,32 @@ def uniform_f64(seed, frame, stream, index) -> np.ndarray:
     return (hi * 67108864.0 + lo + 0.5) * INV_2_53
 
 
-def normal_pair(seed, frame, stream, index) -> tuple[np.ndarray, np.ndarray]:
-    """Two float32 N(0, 1) arrays for the keys by the polar method, attempt for attempt as the
-    kernel's ``normal_pair(key_prefix(seed, frame, stream), index)``."""
+def normal(seed, frame, stream, index) -> np.ndarray:
+    """float32 N(0, 1) for the keys by the ziggurat, draw for draw as the kernel's
+    ``normal_at(tables, key_prefix(seed, frame, stream), index)``."""
     index = np.asarray(index, dtype=np.int64).reshape(-1)
-    out1, out2 = np.zeros(len(index), np.float32), np.zeros(len(index), np.float32)
+    out = np.zeros(len(index), np.float32)
     todo = np.arange(len(index))
-    for k in range(POLAR_TRIES):
-        h = hash_key(seed, frame, stream, _as_u32(index[todo]) * _U32(POLAR_TRIES) + _U32(k))
-        u1 = unit_from_bits(h)
+    tail = np.zeros(len(index), bool)
+    for d in range(ZIG_TRIES):
+        h = hash_key(seed, frame, stream, _as_u32(index[todo]) * _U32(ZIG_TRIES) + _U32(d))
         with np.errstate(over="ignore"):
-            u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN)))
-        v1, v2 = np.float32(2.0) * u1 - np.float32(1.0), np.float32(2.0) * u2 - np.float32(1.0)
-        s = v1 * v1 + v2 * v2
-        ok = s < np.float32(1.0)
-        if k == POLAR_TRIES - 1:  # Box–Muller on the last attempt's uniforms
-            r = np.sqrt(np.float32(-2.0) * np.log(u1[~ok]))
-            a = np.float32(TWO_PI) * u2[~ok]
-            out1[todo[~ok]], out2[todo[~ok]] = r * np.cos(a), r * np.sin(a)
-        f = np.sqrt(np.float32(-2.0) * np.log(s[ok]) / s[ok])
-        out1[todo[ok]], out2[todo[ok]] = v1[ok] * f, v2[ok] * f
-        todo = todo[~ok]
+            u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN))).astype(np.float64)
+        in_tail = tail[todo]
+        i = (h & _U32(ZIG_LAYERS - 1)).astype(np.int64)
+        x = unit_from_bits(h) * ZIG_W[i]
+        fast = ~in_tail & ((h >> _U32(9)) < ZIG_K[i])
+        x64 = x.astype(np.float64)
+        wedge = ~in_tail & ~fast & (i > 0) & (ZIG_PHI[i] + u2 * (ZIG_PHI[np.minimum(i + 1, ZIG_LAYERS)] - ZIG_PHI[i])
+                                              < np.exp(-0.5 * x64 * x64))
+        xt = -np.log(unit_from_bits(h).astype(np.float64)) / ZIG_R
+        tail_ok = in_tail & (-2.0 * np.log(u2) > xt * xt)
+        x = np.where(in_tail, (ZIG_R + xt).astype(np.float32), x)
+        x = np.where((h & _U32(128)) != 0, -x, x)
+        accept = fast | wedge | tail_ok | (d == ZIG_TRIES - 1)
+        out[todo[accept]] = x[accept]
+        tail[todo[~in_tail & ~fast & (i == 0)]] = True
+        todo = todo[~accept]
         if not len(todo):
             break
-    return out1, out2
+    return out
