@@ -14,6 +14,8 @@ import os
 import weakref
 from dataclasses import dataclass
 
+import numpy as np
+
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 
 import taichi as ti  # noqa: E402
@@ -169,3 +171,47 @@ def serial_loops(pixels: int) -> bool:
     SERIAL_PIXELS (there a parallel launch's dispatch costs more than the work it splits)."""
     cfg = current()
     return cfg is not None and cfg.arch == "cpu" and pixels <= SERIAL_PIXELS
+
+
+def _transfer_kernel(direction: str, ndim: int):
+    from .kernels import transfer
+
+    return getattr(transfer, f"{direction}_{ndim}d")
+
+
+def _scalar_field(obj) -> bool:
+    from taichi.lang.field import ScalarField
+
+    return isinstance(obj, ScalarField) and len(obj.shape) in (1, 2)
+
+
+def to_host(source) -> np.ndarray:
+    """A NumPy copy of a 1-D or 2-D scalar field, by a typed kernel: about 40 µs on the CPU where
+    ``field.to_numpy()`` costs about 0.2 ms.  NumPy arrays (the NumPy engine's storage) are copied,
+    other fields go through ``to_numpy``."""
+    if isinstance(source, np.ndarray):
+        return source.copy()
+    if not _scalar_field(source):
+        return source.to_numpy()
+    from taichi.lang.util import to_numpy_type
+
+    out = np.empty(source.shape, dtype=to_numpy_type(source.dtype))
+    _transfer_kernel("field_to_array", len(source.shape))(source, out, serial_loops(out.size))
+    return out
+
+
+def from_host(target, array) -> None:
+    """Copy ``array`` (converted to the target's dtype) into a field or NumPy array of the same
+    shape; 1-D and 2-D scalar fields by a typed kernel (see :func:`to_host`)."""
+    if isinstance(target, np.ndarray):
+        target[...] = array
+        return
+    if not _scalar_field(target):
+        target.from_numpy(np.ascontiguousarray(array))
+        return
+    from taichi.lang.util import to_numpy_type
+
+    array = np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype))
+    if array.shape != tuple(target.shape):
+        raise ValueError(f"array of shape {array.shape} does not fit a field of shape {tuple(target.shape)}")
+    _transfer_kernel("array_to_field", array.ndim)(array, target, serial_loops(array.size))

@@ -126,17 +126,10 @@ class ParticlePool:
     # ------------------------------------------------------------ host ↔ engine
 
     def _put(self, name: str, array: np.ndarray) -> None:
-        target = getattr(self.k, name)
-        if isinstance(target, np.ndarray):
-            target[...] = array
-        else:
-            from taichi.lang.util import to_numpy_type
-
-            target.from_numpy(np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype)))
+        backend.from_host(getattr(self.k, name), array)
 
     def _get(self, name: str) -> np.ndarray:
-        target = getattr(self.k, name)
-        return target.copy() if isinstance(target, np.ndarray) else target.to_numpy()
+        return backend.to_host(getattr(self.k, name))
 
     # ------------------------------------------------------------ configuration
 

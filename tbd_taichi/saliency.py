@@ -192,11 +192,11 @@ class TaichiSaliencyEngine:
         self.keep_i_se = False  # also store I_se (tests, figures)
         self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks), self._fields)
         f = self.f
-        f.valid.from_numpy(valid)
-        f.d.from_numpy(d)
-        f.row_base.from_numpy(grid.row_base)
-        f.col_block.from_numpy(grid.col_block)
-        f.block_offset.from_numpy(grid.offsets)
+        backend.from_host(f.valid, valid)
+        backend.from_host(f.d, d)
+        backend.from_host(f.row_base, grid.row_base)
+        backend.from_host(f.col_block, grid.col_block)
+        backend.from_host(f.block_offset, grid.offsets)
         f.block_max.fill(ks.NEG_INF)
         f.proposal.fill(0)
         f.n_written.fill(0)
@@ -257,13 +257,13 @@ class TaichiSaliencyEngine:
                           self.f.block_stats, self.f.proposal, self.f.written, self.f.n_written)
         if not details:
             return {}
-        stats, blocks = self.f.stats.to_numpy(), self.f.block_stats.to_numpy()
+        stats, blocks = backend.to_host(self.f.stats), backend.to_host(self.f.block_stats)
         nnz = blocks[:, 2].astype(np.int64)
-        entries = self.f.entry_pixel.to_numpy()
+        entries = backend.to_host(self.f.entry_pixel)
         mask = np.zeros(self.shape, bool)
         for off, n in zip(self.grid.offsets, nnz):
             mask.ravel()[entries[off:off + n]] = True
-        return {"proposal": self.f.proposal.to_numpy(), "mask": mask,
+        return {"proposal": backend.to_host(self.f.proposal), "mask": mask,
                 "threshold": float(stats[0]), "i_range": (float(stats[1]), float(stats[2])),
                 "n_eff": blocks[:, 0], "k": blocks[:, 1].astype(np.int64), "nnz": nnz}
 

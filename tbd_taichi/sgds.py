@@ -256,8 +256,7 @@ class SGDSPF:
     # ------------------------------------------------------------ one frame
 
     def _proposal(self) -> np.ndarray:
-        prop = self.saliency.engine.proposal
-        return prop if isinstance(prop, np.ndarray) else prop.to_numpy()
+        return backend.to_host(self.saliency.engine.proposal)
 
     def _process(self, f: int) -> list[tuple]:
         z = self._z.pop(f)

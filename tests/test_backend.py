@@ -1,4 +1,5 @@
 """Backend selection: clear errors, safe repeated init, offline cache."""
+import numpy as np
 import pytest
 import taichi as ti
 
@@ -62,3 +63,33 @@ def test_auto_falls_back_to_cpu_silently():
 def test_bad_thread_count():
     with pytest.raises(BackendError, match="threads"):
         tbd_taichi.init("cpu", threads=0)
+
+
+@pytest.mark.parametrize("shape", [(7,), (1,), (5, 3), (33, 1)])
+@pytest.mark.parametrize("dtype", [np.int32, np.float32, np.float64])
+def test_host_copies_match_to_numpy(shape, dtype):
+    """backend.to_host / from_host (typed kernels) against Taichi's own to_numpy / from_numpy."""
+    rng = np.random.default_rng(3)
+    values = (rng.standard_normal(shape) * 1e6).astype(dtype)
+    values.flat[0] = np.iinfo(dtype).min if dtype == np.int32 else np.finfo(dtype).max  # extremes survive
+    field = ti.field(ti.lang.util.to_taichi_type(dtype), shape=shape)
+    backend.from_host(field, values)
+    np.testing.assert_array_equal(field.to_numpy(), values)
+    field.from_numpy(values[::-1].copy())
+    out = backend.to_host(field)
+    assert out.dtype == dtype and out.shape == shape
+    np.testing.assert_array_equal(out, values[::-1])
+    with pytest.raises(ValueError, match="does not fit"):
+        backend.from_host(field, np.zeros(shape + (2,), dtype))
+
+
+def test_host_copies_of_vector_fields_and_arrays():
+    vec = ti.Vector.field(3, ti.f32, shape=4)
+    values = np.arange(12, dtype=np.float32).reshape(4, 3)
+    backend.from_host(vec, values)
+    np.testing.assert_array_equal(backend.to_host(vec), values)
+    arr = np.zeros(4)
+    backend.from_host(arr, [1, 2, 3, 4])
+    copy = backend.to_host(arr)
+    copy[0] = 9
+    np.testing.assert_array_equal(arr, [1, 2, 3, 4])
