@@ -28,6 +28,7 @@ S_BIRTH_MU, S_COPY = 20, 21
 COPY_TRIES = 16  # draws of a random slot to find an E = 1 particle to copy
 S_NOISE_X, S_NOISE_VX, S_NOISE_I, S_RESAMPLE = range(8, 12)
 S_RESAMPLE_END, S_NOISE_Y, S_NOISE_VY = 22, 23, 24
+S_SYSTEMATIC = 99  # u0 of systematic resampling, one per group
 NOISE_STREAMS = (S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I)  # n1 … n5 of ``propagate``
 
 # per-group sums of ``moments`` (f64)
@@ -65,16 +66,17 @@ class ParticleKernels:
         self.logw, self.born, self.parent, self.cum, self.spc = f32(c), i32(c), i32(c), f64(c), f64(c)
         self.slot_group = i32(c)
         self.off, self.cap, self.n, self.n_out, self.kind = i32(g), i32(g), i32(g), i32(g), i32(g)
+        self.n_before = i32(g)
         self.pb, self.pd, self.mu = f32(g), f32(g), f32(g)
         self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
         self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
-        self.gmax, self.gmax_e, self.gtotal, self.u0 = f32(g), f32(g), f64(g), f64(g)
+        self.gmax, self.gmax_e, self.gtotal = f32(g), f32(g), f64(g)
         self.gt0, self.gt1, self.gspc = i32(g), i32(g), f64(g)
         self.tile_start, self.tile_group = i32(n_tiles), i32(n_tiles)
         self.tile_max, self.tile_max_e, self.tile_total, self.tile_prefix = f32(n_tiles), f32(n_tiles), \
             f64(n_tiles), f64(n_tiles)
         self.tile_spc, self.tile_spc_prefix = f64(n_tiles), f64(n_tiles)
-        self.tile_moments, self.moments = f64(n_tiles, N_MOMENTS), f64(g, N_MOMENTS)
+        self.tile_moments = f64(n_tiles, N_MOMENTS)
         self.map_pixel, self.map_cdf = i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
@@ -95,7 +97,7 @@ class ParticleKernels:
 
     # ------------------------------------------------------------ Eqs. 7–10
 
-    @ti.kernel
+    @ti.func
     def predict_existence(self, seed: ti.u32, frame: ti.i32, b: ti.i32):
         """Step 1, Eqs. 7–8: E ← [u ≥ P_d] if E = 1, [u < P_b] if E = 0; ``born`` marks 0 → 1."""
         key = key_prefix(seed, frame, S_EXIST)
@@ -126,14 +128,22 @@ class ParticleKernels:
                 lo = mid + 1
         return self.map_pixel[lo]
 
-    @ti.kernel
-    def mark_initial(self, old_counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """Slots added since ``old_counts`` (the top-up of Eq. 35) become initial particles (born = 2)."""
+    @ti.func
+    def store_counts(self, counts: ti.template()):
+        """n ← counts (the host's checked live counts), keeping the previous ones in n_before."""
+        ti.loop_config(serialize=True)
+        for g in range(self.n.shape[0]):
+            self.n_before[g] = self.n[g]
+            self.n[g] = counts[g]
+
+    @ti.func
+    def mark_initial(self):
+        """Slots added since n_before (the top-up of Eq. 35) become initial particles (born = 2)."""
         ti.loop_config(serialize=self.serial)
         for i in range(self.capacity):
             if self.live(i):
                 g = self.slot_group[i]
-                if i - self.off[g] >= old_counts[g]:
+                if i - self.off[g] >= self.n_before[g]:
                     self.born[i] = 2
 
     @ti.func
@@ -147,7 +157,7 @@ class ParticleKernels:
         self.tp[dst, i] = self.tp[src, j]
         self.seq[dst, i] = self.seq[src, j]
 
-    @ti.kernel
+    @ti.func
     def draw_newborn(self, seed: ti.u32, frame: ti.i32, b: ti.i32, width: ti.i32):
         """Step 2 for newborn (born = 1, E 0 → 1) and initial (born = 2) particles (Eq. 34).
 
@@ -201,7 +211,7 @@ class ParticleKernels:
                     if self.born[i] == 2:
                         self.e[b, i] = ti.cast(uniform_at(km, i) < self.mu[g], ti.i32)
 
-    @ti.kernel
+    @ti.func
     def propagate(self, seed: ti.u32, frame: ti.i32, b: ti.i32, q1: ti.f32, q2: ti.f32, i_floor: ti.f32,
                   width: ti.i32, height: ti.i32):
         """Step 2 for existing particles (E 1 → 1, and copied newborns of kind 2), Eqs. 9–10: NCV plus
@@ -230,9 +240,20 @@ class ParticleKernels:
                 if x < -0.5 or x >= width - 0.5 or y < -0.5 or y >= height - 0.5:
                     self.e[b, i] = 0
 
+    @ti.kernel
+    def predict(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32):
+        """Steps 1–2 in one launch: existence (Eqs. 7–8), live counts ← ``counts`` with the added slots
+        as initial particles (Eq. 35), newborn and initial draws, propagation (Eqs. 9–10)."""
+        self.predict_existence(seed, frame, b)
+        self.store_counts(counts)
+        self.mark_initial()
+        self.draw_newborn(seed, frame, b, width)
+        self.propagate(seed, frame, b, q1, q2, i_floor, width, height)
+
     # ------------------------------------------------------------ Eqs. 11–15
 
-    @ti.kernel
+    @ti.func
     def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32):
         """Step 3, Eq. 15 in the log domain: for E = 1,
         log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
@@ -271,7 +292,7 @@ class ParticleKernels:
 
     # ------------------------------------------------------------ Eqs. 16–18, segmented and deterministic
 
-    @ti.kernel
+    @ti.func
     def tile_maxima(self, b: ti.i32):
         """Per tile: the largest log-weight, and the largest among E = 1 particles."""
         ti.loop_config(serialize=self.serial)
@@ -284,7 +305,7 @@ class ParticleKernels:
             self.tile_max[t] = m
             self.tile_max_e[t] = me
 
-    @ti.kernel
+    @ti.func
     def group_maxima(self):
         """Per group: max over its tiles (gmax normalises Eq. 16; gmax_e is the best E = 1 log-weight)."""
         ti.loop_config(serialize=self.serial)
@@ -296,7 +317,7 @@ class ParticleKernels:
             self.gmax[g] = m
             self.gmax_e[g] = me
 
-    @ti.kernel
+    @ti.func
     def tile_cumulative(self):
         """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64."""
         ti.loop_config(serialize=self.serial)
@@ -317,12 +338,35 @@ class ParticleKernels:
             s += totals[t]
         return s
 
-    @ti.kernel
+    @ti.func
     def group_prefix(self):
         """Eq. 17 across tiles: exclusive prefix of tile totals per group, and the group total."""
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
             self.gtotal[g] = self.exclusive_tile_prefix(g, self.tile_total, self.tile_prefix)
+
+    @ti.func
+    def normalise_weights(self, b: ti.i32):
+        """Step 4: per-group maxima and f64 cumulative sums of the current log-weights (Eqs. 16–17)."""
+        self.tile_maxima(b)
+        self.group_maxima()
+        self.tile_cumulative()
+        self.group_prefix()
+
+    @ti.kernel
+    def normalise(self, b: ti.i32):
+        """Step 4 alone, on log-weights set from outside."""
+        self.normalise_weights(b)
+
+    @ti.kernel
+    def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        """Steps 3–4 in one launch: log-weights (Eq. 15), their normalisation, and each group's
+        largest E = 1 log-weight into ``best``."""
+        self.log_weights(b, psf_sigma, noise_sigma)
+        self.normalise_weights(b)
+        ti.loop_config(serialize=True)
+        for g in range(best.shape[0]):
+            best[g] = self.gmax_e[g]
 
     @ti.func
     def out_tile_end(self, t: ti.i32) -> ti.i32:
@@ -347,7 +391,7 @@ class ParticleKernels:
                 lo = mid + 1
         return lo
 
-    @ti.kernel
+    @ti.func
     def tile_spacings(self, seed: ti.u32, frame: ti.i32):
         """Multinomial resampling, part 1: exponential spacings −log u (f64) over each group's output
         slots, summed within tiles (spc), with the tile totals."""
@@ -362,7 +406,7 @@ class ParticleKernels:
                     self.spc[i] = s
             self.tile_spc[t] = s
 
-    @ti.kernel
+    @ti.func
     def group_spacings(self, seed: ti.u32, frame: ti.i32):
         """Multinomial resampling, part 2: exclusive tile prefixes of the spacings and each group's
         total, which includes one more spacing (the (n_out + 1)-th, keyed on the group)."""
@@ -372,13 +416,15 @@ class ParticleKernels:
             self.gspc[g] = self.exclusive_tile_prefix(g, self.tile_spc, self.tile_spc_prefix) - \
                 ti.log(uniform_f64_at(key, g))
 
-    @ti.kernel
-    def draw_parents(self, systematic: ti.i32):
+    @ti.func
+    def draw_parents(self, systematic: ti.template(), seed: ti.u32, frame: ti.i32):
         """Eq. 18 for sorted positions: output slot m < n_out_g of group g takes the parent whose
         cumulative-weight interval holds u_m·Σw.  Multinomial: u_m = S_m / S_{n_out+1}, S the running
         sum of exponential spacings, which are the order statistics of n_out i.i.d. U(0, 1) (the
-        paper's independent uniforms, sorted); systematic: u_m = (m + u0_g)/n_out_g.  Sorted u lets
+        paper's independent uniforms, sorted); systematic: u_m = (m + u0_g)/n_out_g, u0_g keyed on
+        (seed, frame, S_SYSTEMATIC, g).  Sorted u lets
         each tile binary-search its first parent and walk forward from there."""
+        key = key_prefix(seed, frame, S_SYSTEMATIC)
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
             g = self.tile_group[t]
@@ -387,8 +433,8 @@ class ParticleKernels:
                 p = -1
                 for i in range(self.tile_start[t], self.out_tile_end(t)):
                     u = ti.cast(0.0, ti.f64)
-                    if systematic:
-                        u = (ti.cast(i - self.off[g], ti.f64) + self.u0[g]) / ti.cast(self.n_out[g], ti.f64)
+                    if ti.static(systematic):
+                        u = (ti.cast(i - self.off[g], ti.f64) + uniform_f64_at(key, g)) / ti.cast(self.n_out[g], ti.f64)
                     else:
                         u = (self.tile_spc_prefix[t] + self.spc[i]) / self.gspc[g]
                     v = u * self.gtotal[g]
@@ -399,16 +445,18 @@ class ParticleKernels:
                     self.parent[i] = p
 
     @ti.kernel
-    def set_counts(self, which: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """n (which = 0) or n_out (which = 1) from the host, in one small serial launch."""
+    def set_counts(self, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Live counts n ← ``counts`` from the host, in one small serial launch."""
+        self.store_counts(counts)
+
+    @ti.func
+    def set_out_counts(self, counts: ti.template()):
+        """n_out ← counts (0 for an empty group)."""
         ti.loop_config(serialize=True)
         for g in range(counts.shape[0]):
-            if which == 0:
-                self.n[g] = counts[g]
-            else:
-                self.n_out[g] = ti.select(self.n[g] > 0, counts[g], 0)
+            self.n_out[g] = ti.select(self.n[g] > 0, counts[g], 0)
 
-    @ti.kernel
+    @ti.func
     def commit_counts(self):
         """After gathering: every group's live count becomes its resampled count."""
         ti.loop_config(serialize=True)
@@ -416,12 +464,26 @@ class ParticleKernels:
             self.n[g] = self.n_out[g]
 
     @ti.kernel
+    def resample(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                 systematic: ti.template()):
+        """Step 5 (Eqs. 17–18) in one launch: each group draws ``counts[g]`` parents from buffer b and
+        buffer 1 − b receives them; live counts become ``counts``."""
+        self.set_out_counts(counts)
+        if ti.static(not systematic):
+            self.tile_spacings(seed, frame)
+            self.group_spacings(seed, frame)
+        self.draw_parents(systematic, seed, frame)
+        self.gather(b)
+        self.commit_counts()
+
+    @ti.kernel
     def write_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
                     x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
                     y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),
                     inten: ti.types.ndarray(dtype=ti.f32, ndim=1), e: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                    tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """Host particle states into ``slots`` of buffer b, in one launch for every group."""
+                    tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Host particle states into ``slots`` of buffer b, and the live counts, in one launch for every group."""
         ti.loop_config(serialize=self.serial)
         for k in range(slots.shape[0]):
             i = slots[k]
@@ -433,6 +495,7 @@ class ParticleKernels:
             self.e[b, i] = e[k]
             self.tp[b, i] = tp[k]
             self.seq[b, i] = seq[k]
+        self.store_counts(counts)
 
     @ti.kernel
     def read_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -471,7 +534,7 @@ class ParticleKernels:
             for x in range(z.shape[1]):
                 self.z[y + PAD, x + PAD] = z[y, x]
 
-    @ti.kernel
+    @ti.func
     def gather(self, src: ti.i32):
         """Copy each output slot's parent state from buffer src into buffer 1 − src; weights reset (1/L)."""
         dst = 1 - src
@@ -486,7 +549,7 @@ class ParticleKernels:
 
     # ------------------------------------------------------------ Eq. 19 and spreads
 
-    @ti.kernel
+    @ti.func
     def tile_sums(self, b: ti.i32):
         """Per tile (serially, in slot order): the sums behind Eq. 19, P(E), mean Tp and the covariance."""
         ti.loop_config(serialize=self.serial)
@@ -503,12 +566,28 @@ class ParticleKernels:
                 self.tile_moments[t, k] = acc[k]
 
     @ti.kernel
-    def group_sums(self):
-        """Per group: the tile sums added in tile order."""
+    def estimates(self, b: ti.i32, moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """Per group, the tile sums added in tile order into ``moments`` (G, N_MOMENTS)."""
+        self.tile_sums(b)
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
             for k in ti.static(range(N_MOMENTS)):
                 s = ti.cast(0.0, ti.f64)
                 for t in range(self.gt0[g], self.gt1[g]):
                     s += self.tile_moments[t, k]
-                self.moments[g, k] = s
+                moments[g, k] = s
+
+    @ti.kernel
+    def load_map(self, off: ti.types.ndarray(dtype=ti.i32, ndim=1), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                 total: ti.types.ndarray(dtype=ti.f64, ndim=1), pixel: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                 cdf: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        """The groups' proposal maps (pixel lists with f64 cumulative weights), in one launch."""
+        ti.loop_config(serialize=True)
+        for g in range(off.shape[0]):
+            self.map_off[g] = off[g]
+            self.map_n[g] = count[g]
+            self.map_total[g] = total[g]
+        ti.loop_config(serialize=self.serial)
+        for k in range(pixel.shape[0]):
+            self.map_pixel[k] = pixel[k]
+            self.map_cdf[k] = cdf[k]

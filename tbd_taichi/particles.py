@@ -108,7 +108,8 @@ class ParticlePool:
         self._put("gt0", gt0)
         self._put("gt1", gt1)
         self.counts = np.zeros(self.n_groups, np.int32)
-        self.k.set_counts(0, self.counts)
+        self.k.set_counts(self.counts)
+        self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
@@ -140,7 +141,7 @@ class ParticlePool:
         ``kind``: "uniform" over ``region`` = (x0, x1, y0, y1) px (default: the whole image,
         [−½, W−½) × [−½, H−½)), "map" (the group's proposal map) or "copy" (a random E = 1
         particle of the group: tracking PFs).  ``vmax`` px/frame; ``intensity`` = (I_min, I_max);
-        ``mu`` the existence probability of initial particles added by :meth:`grow` (Eq. 34).
+        ``mu`` the existence probability of initial particles added by the top-up of :meth:`predict` (Eq. 34).
         """
         if kind not in BIRTH_KINDS:
             raise ParameterError(f"birth kind must be one of {', '.join(BIRTH_KINDS)}, got {kind!r}")
@@ -175,39 +176,18 @@ class ParticlePool:
             pos += len(pix)
         if pos > self.map_capacity:
             raise ParameterError(f"proposal maps hold {pos} pixels, more than the pool's map capacity {self.map_capacity}")
-        for name, value in (("map_off", off), ("map_n", count), ("map_total", total)):
-            self._put(name, value)
-        if pos:
-            full_pix = np.zeros(self.map_capacity, np.int32)
-            full_cdf = np.zeros(self.map_capacity)
-            full_pix[:pos], full_cdf[:pos] = np.concatenate(pixels), np.concatenate(cdf)
-            self._put("map_pixel", full_pix)
-            self._put("map_cdf", full_cdf)
+        full_pix = np.concatenate(pixels) if pixels else np.zeros(1, np.int32)
+        full_cdf = np.concatenate(cdf) if cdf else np.zeros(1)
+        self.k.load_map(off, count, total, full_pix.astype(np.int32), full_cdf)
 
     def set_counts(self, counts) -> None:
         """Set the live particle count of every group (checked against its capacity)."""
+        self.counts = self._checked_counts(counts, "live count")
+        self.k.set_counts(self.counts)
+
+    def _checked_counts(self, counts, what: str) -> np.ndarray:
+        """``counts`` as int32, one per group, each within its group's capacity (else ParameterError)."""
         counts = np.asarray(counts, dtype=np.int64).reshape(-1)
-        self._check_counts(counts, "live count")
-        self.counts = counts.astype(np.int32)
-        self.k.set_counts(0, self.counts)
-
-    def grow(self, counts) -> None:
-        """Raise live counts to ``counts``; the added slots become initial particles (Eqs. 34–35),
-        drawn by the next :meth:`predict` from the group's proposal with E = [U < μ]."""
-        counts = np.maximum(np.asarray(counts, dtype=np.int64).reshape(-1), self.counts)
-        old = self.counts.copy()
-        self.set_counts(counts)
-        self.k.mark_initial(old)
-
-    def load_labels(self, labels: np.ndarray) -> None:
-        """PP label image (H, W) int32 that map-drawn particles take their Seq from (Eq. 36)."""
-        self.k.load_labels(np.ascontiguousarray(labels, dtype=np.int32))
-
-    def max_log_weights(self) -> np.ndarray:
-        """Per group, the largest log-weight of an E = 1 particle in the last :meth:`weigh` (−3e38: none)."""
-        return self._get("gmax_e").astype(np.float64)
-
-    def _check_counts(self, counts: np.ndarray, what: str) -> None:
         if counts.shape != (self.n_groups,):
             raise ParameterError(f"need one {what} per group ({self.n_groups}), got {counts.shape}")
         over = np.flatnonzero((counts > self.caps) | (counts < 0))
@@ -215,6 +195,15 @@ class ParticlePool:
             g = int(over[0])
             raise ParameterError(f"group {g}: {what} {int(counts[g])} exceeds its capacity {int(self.caps[g])} "
                                  f"(or is negative); the pool is unchanged")
+        return counts.astype(np.int32)
+
+    def load_labels(self, labels: np.ndarray) -> None:
+        """PP label image (H, W) int32 that map-drawn particles take their Seq from (Eq. 36)."""
+        self.k.load_labels(np.ascontiguousarray(labels, dtype=np.int32))
+
+    def max_log_weights(self) -> np.ndarray:
+        """Per group, the largest log-weight of an E = 1 particle in the last :meth:`weigh` (−3e38: none)."""
+        return self._best.astype(np.float64)
 
     # ------------------------------------------------------------ state
 
@@ -253,13 +242,15 @@ class ParticlePool:
         counts = self.counts.astype(np.int64).copy()
         touched = np.arange(self.n_groups) if groups is None else np.asarray(groups, dtype=np.int64)
         counts[touched] = per_group[touched]
-        self._check_counts(counts, "particle count")
-        if len(group):
-            slots = self._slots_in_order(group, per_group)
-            arrays = [np.ascontiguousarray(np.broadcast_to(cols.get(name, 0), len(group)), dtype=dtype)
-                      for name, dtype in STATE_DTYPES[:-1]]  # all but logw
-            self.k.write_slots(self.buf, slots, *arrays)
-        self.set_counts(counts)
+        counts = self._checked_counts(counts, "particle count")
+        if not len(group):
+            self.set_counts(counts)
+            return
+        slots = self._slots_in_order(group, per_group)
+        arrays = [np.ascontiguousarray(np.broadcast_to(cols.get(name, 0), len(group)), dtype=dtype)
+                  for name, dtype in STATE_DTYPES[:-1]]  # all but logw
+        self.k.write_slots(self.buf, slots, *arrays, counts)
+        self.counts = counts
 
     # ------------------------------------------------------------ one step
 
@@ -273,44 +264,27 @@ class ParticlePool:
     def predict(self, frame: int, top_up=None) -> None:
         """Steps 1–2: existence (Eqs. 7–8), newborn and initial draws, NCV propagation (Eqs. 9–10).
 
-        ``top_up`` (optional counts per group) grows the groups after the existence step, so
-        the added initial particles are drawn in the same launch as the newborns (Eq. 35)."""
-        k, h, w = self.k, self.frame_shape[0], self.frame_shape[1]
-        k.predict_existence(self.seed, frame, self.buf)
-        if top_up is not None:
-            self.grow(top_up)
-        k.draw_newborn(self.seed, frame, self.buf, w)
-        k.propagate(self.seed, frame, self.buf, self.q1, self.q2, self.intensity_floor, w, h)
+        ``top_up`` (optional counts per group) grows the groups after the existence step; the
+        added slots become initial particles, drawn in the same launch as the newborns (Eq. 35)."""
+        counts = self.counts if top_up is None else \
+            self._checked_counts(np.maximum(np.asarray(top_up, np.int64).reshape(-1), self.counts), "live count")
+        h, w = self.frame_shape
+        self.k.predict(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h)
+        self.counts = counts
 
     def weigh(self) -> None:
         """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
-        self.k.log_weights(self.buf, self.psf_sigma, self.noise_sigma)
-        self.normalise()
+        self.k.weigh(self.buf, self.psf_sigma, self.noise_sigma, self._best)
 
     def normalise(self) -> None:
         """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
-        k = self.k
-        k.tile_maxima(self.buf)
-        k.group_maxima()
-        k.tile_cumulative()
-        k.group_prefix()
+        self.k.normalise(self.buf)
 
     def resample(self, frame: int, n_out=None, systematic: bool = False) -> None:
         """Step 5 (Eqs. 17–18): each group draws ``n_out[g]`` particles (default: its live count)."""
-        n_out = self.counts.copy() if n_out is None else np.asarray(n_out, dtype=np.int64).reshape(-1)
-        self._check_counts(n_out, "resampled count")
+        n_out = self.counts if n_out is None else self._checked_counts(n_out, "resampled count")
         n_out = np.where(self.counts > 0, n_out, 0).astype(np.int32)
-        self.k.set_counts(1, n_out)
-        if systematic:
-            from .numpy_kernels import rng
-
-            self._put("u0", rng.uniform_f64(self.seed, frame, 99, np.arange(self.n_groups)))
-        else:
-            self.k.tile_spacings(self.seed, frame)
-            self.k.group_spacings(self.seed, frame)
-        self.k.draw_parents(int(systematic))
-        self.k.gather(self.buf)
-        self.k.commit_counts()
+        self.k.resample(self.seed, frame, self.buf, n_out, bool(systematic))
         self.buf = 1 - self.buf
         self.counts = n_out
 
@@ -333,11 +307,10 @@ class ParticlePool:
     def estimates(self) -> GroupEstimates:
         """Eq. 19, existence probability, mean Tp and covariance per group (current buffer)."""
         from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EY, M_N, M_TP, M_X, M_XX, M_XY, M_Y,
-                                        M_YY)
+                                        M_YY, N_MOMENTS)
 
-        self.k.tile_sums(self.buf)
-        self.k.group_sums()
-        m = self._get("moments")
+        m = np.empty((self.n_groups, N_MOMENTS))
+        self.k.estimates(self.buf, m)
         n, ne = m[:, M_N], m[:, M_E]
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = lambda col, d: np.where(d > 0, m[:, col] / d, np.nan)  # noqa: E731

@@ -207,6 +207,7 @@ class SGDSPF:
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
+        self.ended_groups: list[int] = []  # groups of tracks ended this frame, emptied by _release_groups
         self.active: list[Track] = []
         self.finished: list[Track] = []
         self.next_track_id = 1
@@ -412,6 +413,7 @@ class SGDSPF:
             if t.confirmed and t.path[-1][0] == f:
                 rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
         self._merge_duplicates()
+        self._release_groups()
         return rows
 
     def _merge_duplicates(self) -> None:
@@ -423,12 +425,19 @@ class SGDSPF:
 
     def _end_track(self, t: Track) -> None:
         self.active.remove(t)
-        self.free_groups.append(t.group)
-        counts = self.tracks_pool.counts.copy()
-        counts[t.group] = 0
-        self.tracks_pool.set_counts(counts)
+        self.ended_groups.append(t.group)
         if t.confirmed and self.history:
             self.finished.append(t)
+
+    def _release_groups(self) -> None:
+        """Empty the tracking PFs of the tracks ended this frame (one launch) and free their groups."""
+        if not self.ended_groups:
+            return
+        counts = self.tracks_pool.counts.copy()
+        counts[self.ended_groups] = 0
+        self.tracks_pool.set_counts(counts)
+        self.free_groups += self.ended_groups
+        self.ended_groups = []
 
 
 def make_tracker(method: str, shape, **kw):

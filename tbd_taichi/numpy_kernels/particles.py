@@ -10,7 +10,7 @@ import numpy as np
 
 from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
                                   S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, NOISE_STREAMS,
-                                  S_RESAMPLE, S_RESAMPLE_END, TILE, TWO_PI)
+                                  S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI)
 from ..particles import STATE
 from . import rng
 
@@ -42,16 +42,16 @@ class NumpyParticleKernels:
         self.logw, self.born, self.parent, self.cum, self.spc = np.zeros(c, F32), np.zeros(c, np.int32), \
             np.zeros(c, np.int32), np.zeros(c), np.zeros(c)
         self.slot_group = np.full(c, -1, np.int32)
-        for name in ("off", "cap", "n", "n_out", "kind", "gt0", "gt1", "map_off", "map_n"):
+        for name in ("off", "cap", "n", "n_out", "n_before", "kind", "gt0", "gt1", "map_off", "map_n"):
             setattr(self, name, np.zeros(g, np.int32))
         for name in ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax", "gmax", "gmax_e"):
             setattr(self, name, np.zeros(g, F32))
-        self.gtotal, self.u0, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g), np.zeros(g)
+        self.gtotal, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
         self.tile_max, self.tile_max_e = np.zeros(n_tiles, F32), np.zeros(n_tiles, F32)
         self.tile_total, self.tile_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
         self.tile_spc, self.tile_spc_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
-        self.tile_moments, self.moments = np.zeros((n_tiles, N_MOMENTS)), np.zeros((g, N_MOMENTS))
+        self.tile_moments = np.zeros((n_tiles, N_MOMENTS))
         self.map_pixel, self.map_cdf = np.zeros(map_capacity, np.int32), np.zeros(map_capacity)
         self.z = np.zeros(frame_shape, F32)
         self.label = np.zeros(frame_shape, np.int32)
@@ -89,11 +89,22 @@ class NumpyParticleKernels:
             out[sel] = self.map_pixel[lo + np.minimum(k, n - 1)]
         return out
 
-    def mark_initial(self, old_counts: np.ndarray) -> None:
+    def store_counts(self, counts: np.ndarray) -> None:
+        self.n_before[:] = self.n
+        self.n[:] = counts
+
+    def mark_initial(self) -> None:
         i = self.live_slots()
         g = self.slot_group[i]
-        new = i - self.off[g] >= old_counts[g]
+        new = i - self.off[g] >= self.n_before[g]
         self.born[i[new]] = 2
+
+    def predict(self, seed, frame, b, counts, q1, q2, i_floor, width, height) -> None:
+        self.predict_existence(seed, frame, b)
+        self.store_counts(counts)
+        self.mark_initial()
+        self.draw_newborn(seed, frame, b, width)
+        self.propagate(seed, frame, b, q1, q2, i_floor, width, height)
 
     def draw_newborn(self, seed: int, frame: int, b: int, width: int) -> None:
         i = self.live_slots()
@@ -188,6 +199,17 @@ class NumpyParticleKernels:
                + gy[:, 4] * gy[:, 4])
         self.logw[i] = (a * sz - F32(0.5) * a * a * sgx * sgy) * inv_var
 
+    def normalise(self, b: int) -> None:
+        self.tile_maxima(b)
+        self.group_maxima()
+        self.tile_cumulative()
+        self.group_prefix()
+
+    def weigh(self, b: int, psf_sigma: float, noise_sigma: float, best: np.ndarray) -> None:
+        self.log_weights(b, psf_sigma, noise_sigma)
+        self.normalise(b)
+        best[:] = self.gmax_e
+
     # ------------------------------------------------------------ Eqs. 16–18
 
     def _tile_slices(self):
@@ -255,35 +277,40 @@ class NumpyParticleKernels:
         for g in range(len(self.off)):
             self.gspc[g] = self._exclusive_prefix(self.tile_spc, self.gt0[g], self.gt1[g], self.tile_spc_prefix) + end[g]
 
-    def draw_parents(self, systematic: int) -> None:
+    def draw_parents(self, systematic: bool, seed: int, frame: int) -> None:
+        u0 = rng.uniform_f64(seed, frame, S_SYSTEMATIC, np.arange(len(self.off)))
         for g in range(len(self.off)):
             n, m_out, off = int(self.n[g]), int(self.n_out[g]), int(self.off[g])
             if n == 0 or m_out == 0:
                 continue
             slots = off + np.arange(m_out)
             if systematic:
-                u = (slots - off + self.u0[g]) / np.float64(m_out)
+                u = (slots - off + u0[g]) / np.float64(m_out)
             else:
                 u = (self.tile_spc_prefix[self.gt0[g] + (slots - off) // TILE] + self.spc[slots]) / self.gspc[g]
             live = off + np.arange(n)
             edges = self.tile_prefix[self.gt0[g] + (live - off) // TILE] + self.cum[live]  # Eq. 17
             self.parent[slots] = off + np.minimum(np.searchsorted(edges, u * self.gtotal[g], side="right"), n - 1)
 
-    def set_counts(self, which: int, counts: np.ndarray) -> None:
-        if which == 0:
-            self.n[:] = counts
-        else:
-            self.n_out[:] = np.where(self.n > 0, counts, 0)
+    def set_counts(self, counts: np.ndarray) -> None:
+        self.store_counts(counts)
 
-    def commit_counts(self) -> None:
+    def resample(self, seed: int, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
+        self.n_out[:] = np.where(self.n > 0, counts, 0)
+        if not systematic:
+            self.tile_spacings(seed, frame)
+            self.group_spacings(seed, frame)
+        self.draw_parents(systematic, seed, frame)
+        self.gather(b)
         self.n[:] = self.n_out
 
     def load_frame(self, z: np.ndarray) -> None:
         self.z[...] = z
 
-    def write_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq) -> None:
+    def write_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, counts) -> None:
         for name, value in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
             getattr(self, name)[b, slots] = value
+        self.store_counts(counts)
 
     def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
         for name, out in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
@@ -316,7 +343,11 @@ class NumpyParticleKernels:
                     ev * self.inten[b, s:e], self.tp[b, s:e].astype(np.float64), x, y, x * x, y * y, x * y]
             self.tile_moments[t] = [np.sum(c, dtype=np.float64) for c in cols]
 
-    def group_sums(self) -> None:
+    def estimates(self, b: int, moments: np.ndarray) -> None:
+        self.tile_sums(b)
         for g in range(len(self.off)):
-            self.moments[g] = self.tile_moments[self.gt0[g]:self.gt1[g]].sum(axis=0)
+            moments[g] = self.tile_moments[self.gt0[g]:self.gt1[g]].sum(axis=0)
 
+    def load_map(self, off, count, total, pixel, cdf) -> None:
+        self.map_off[:], self.map_n[:], self.map_total[:] = off, count, total
+        self.map_pixel[:len(pixel)], self.map_cdf[:len(cdf)] = pixel, cdf
