@@ -1,7 +1,8 @@
 """Score SGDS-PF on the real drone-ir clips; writes docs/results/drone_ir.md and an overlay GIF.
 
-One configuration for every clip (no per-clip tuning): ``SGDSPF(shape, background="spatiotemporal",
-snr=5)``, otherwise defaults (bad-pixel suppression on, seed 0).  Scores use
+One configuration for every clip (no per-clip tuning): ``SGDSPF(shape, **REAL_VIDEO)`` =
+``background="spatiotemporal", snr=5, min_peak_z=15``, otherwise defaults (bad-pixel suppression
+on, seed 0).  Scores use
 the online output (rows as they are confirmed, what a live user sees):
 
 * detection rate: labelled frames with a confirmed point inside the label box grown by 2 px;
@@ -80,6 +81,8 @@ def main() -> None:
     tbd.init("cpu")
     data, out_dir = Path(args.data), ROOT / "docs" / "results"
     rows = []
+    first = min(LOCAL_SNR, key=LOCAL_SNR.get)
+    score_clip(data / f"{first}.mp4", data / f"{first}.csv", 8)  # compiles the kernels: ms/frame without it
     for clip in sorted(LOCAL_SNR, key=LOCAL_SNR.get):
         scores, tracks = score_clip(data / f"{clip}.mp4", data / f"{clip}.csv", args.frames)
         rows.append((clip, scores))
@@ -90,8 +93,8 @@ def main() -> None:
     dim = [s for c, s in rows if LOCAL_SNR[c] < 3]
     lines = ["# SGDS-PF on the real drone-ir clips", "",
              f"`python benchmarks/drone_ir_eval.py{' --frames ' + str(args.frames) if args.frames else ''}` — one "
-             "configuration for every clip: `SGDSPF(shape, background='spatiotemporal', snr=5)`, otherwise defaults (bad-pixel "
-             "suppression, seed 0), online output, CPU.", "",
+             f"configuration for every clip: `SGDSPF(shape, **REAL_VIDEO)` with REAL_VIDEO = `{REAL_VIDEO}` "
+             "(`tbd-taichi track --real-video`), otherwise defaults (bad-pixel suppression, seed 0), online output, CPU.", "",
              "| clip | local SNR | frames | detection rate | false points / frame | frames to first confirmation "
              "| tracks | ms/frame |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for clip, s in rows:
@@ -101,9 +104,25 @@ def main() -> None:
     lines += ["", f"Mean detection rate: {mean(bright, 'detection_rate'):.2f} on the {len(bright)} clips with local SNR ≥ 3 "
               f"(goal 0.8), {mean(dim, 'detection_rate'):.2f} on the dimmest two (goal 0.5). Mean false points per frame: "
               f"{mean([s for _, s in rows], 'false_points'):.2f} (goal 0.05).", "",
-              "Before the spatiotemporal background (session 4: `background='spatial'`, snr 1.4 preset): mean detection "
-              "0.86 (local SNR ≥ 3) and 0.55 (dimmest two), 11.65 false points per frame: still point-like clutter "
-              "(tree tops, dark sensor rows, compression texture) was confirmed.", "",
+              "How the configuration came about (the same 12 clips; there is no held-out set, so these figures are "
+              "optimistic for unseen video):", "",
+              "| configuration | detection, local SNR ≥ 3 | detection, dimmest two | false points / frame |",
+              "|---|---:|---:|---:|",
+              "| `background='spatial'`, snr 1.4 | 0.86 | 0.55 | 11.65 |",
+              "| `background='spatiotemporal'`, snr 5 | 0.88 | 0.91 | 1.23 |",
+              "| … snr 8 | 0.76 | 0.89 | 0.20 |",
+              "| … snr 12 | 0.63 | 0.44 | 0.07 |",
+              "| … snr 5, min_peak_z 10 | 0.87 | 0.91 | 0.32 |",
+              "| … snr 5, min_peak_z 12 | 0.86 | 0.90 | 0.20 |",
+              "| … snr 5, min_peak_z 15 (chosen) | 0.84 | 0.81 | 0.08 |", "",
+              "With `spatial` alone, still point-like clutter (tree tops, dark sensor rows, compression texture) was "
+              "confirmed. With the spatiotemporal background the confirmed clutter is fainter than the targets: "
+              "over the snr-5 run's tracks, the largest z within 1 px of the estimate (median over a track's rows) is "
+              "10–52 on the 17 tracks on a target (16 or more on every clip's main track) and 0.5–14.3 on the 37 "
+              "others. Raising the snr preset instead costs "
+              "acquisition (it also raises the saliency threshold and the birth intensities), so the gate "
+              "(`min_peak_z`, output only) was chosen. The false points left are mostly real unlabelled objects: a "
+              "vehicle moving along the road in IR_DRONE_142 and moving ground objects in IR_BIRD_016.", "",
               f"![{args.gif}](drone_ir.gif)", ""]
     (out_dir / "drone_ir.md").write_text("\n".join(lines))
     print(f"-> {out_dir / 'drone_ir.md'}")

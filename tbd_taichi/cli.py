@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import backend, metrics, tables
-from .background import BACKGROUNDS, DEFAULT_BACKGROUND
+from .background import BACKGROUNDS, DEFAULT_BACKGROUND, REAL_VIDEO
 from .errors import TBDError
 from .progress import progress_bar
 
@@ -70,12 +70,18 @@ def cmd_track(args) -> int:
     from .sgds import MIN_FRAMES, make_tracker
 
     source = io.open_frames(args.input)
-    method_only = dict(n_particles=args.particles, threshold=args.threshold) if args.method == "pf" else {}
+    preset = REAL_VIDEO if args.real_video else dict(background=DEFAULT_BACKGROUND, snr=1.4, min_peak_z=0.0)
+    chosen = {name: getattr(args, name) if getattr(args, name) is not None else value for name, value in preset.items()}
+    if args.method == "pf":
+        method_only = dict(n_particles=args.particles, threshold=args.threshold)
+        chosen.pop("min_peak_z")
+    else:
+        method_only = {}
     stream = args.method == "sgds" and args.paths == "online"  # rows go to the CSV as they come: constant memory
     if stream:
         method_only["history"] = False
-    tracker = make_tracker(args.method, source.shape, snr=args.snr, seed=args.seed, engine=args.engine,
-                           background=args.background, bad_pixels=not args.no_bad_pixels, **method_only)
+    tracker = make_tracker(args.method, source.shape, seed=args.seed, engine=args.engine,
+                           bad_pixels=not args.no_bad_pixels, **chosen, **method_only)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     max_projection = None
@@ -209,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--method", choices=("sgds", "pf"), default="sgds",
                     help="sgds: the saliency-guided double-stage PF (default); pf: the original single-target PF-TBD "
                          "(Ristic et al.; SGDS-PF's baseline)")
-    tr.add_argument("--snr", type=float, default=1.4, help="the lowest target SNR to detect (default 1.4)")
+    tr.add_argument("--snr", type=float, default=None, help="the lowest target SNR to detect (default 1.4; 5 with --real-video)")
     tr.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same file (default 0)")
     tr.add_argument("--engine", choices=("taichi", "numpy"), default="taichi", help="kernel engine (default taichi)")
     tr.add_argument("--particles", type=int, default=None,
@@ -223,11 +229,16 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--truth", default=None, help="truth CSV (frame,target_id,x,y,...): print DSR, EDT, false tracks, OSPA")
     tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail (.mp4 or .avi)")
     tr.add_argument("--plot", default=None, help="PNG of the tracks over the max-projection (with the truth if given)")
-    tr.add_argument("--background", choices=BACKGROUNDS, default=DEFAULT_BACKGROUND,
+    tr.add_argument("--background", choices=BACKGROUNDS, default=None,
                     help="background suppression before the filters: none (global median and σ, as in the paper; "
                          "default), mean, spatial (hollow local mean), temporal (running mean) or spatiotemporal (the spatial "
-                         "residual minus its running mean: for real still-camera video use it with --snr 5), all but "
-                         "none with a local noise σ")
+                         "residual minus its running mean; the --real-video choice), all but none with a local noise σ")
+    tr.add_argument("--min-peak-z", type=float, default=None,
+                    help="sgds: report a confirmed track only while its running peak z (largest normalised value "
+                         "within 1 px) is at least this (default 0: off, as in the paper; 15 with --real-video)")
+    tr.add_argument("--real-video", action="store_true",
+                    help="settings for real still-camera infrared video: --background spatiotemporal --snr 5 "
+                         "--min-peak-z 15 (each can still be given); see the README's real-video section")
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", action="store_true", help="show a progress bar")

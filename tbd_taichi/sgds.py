@@ -48,6 +48,7 @@ MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
+PEAK_RHO = 0.1  # a track's running peak z: exponential mean with this weight on the newest frame
 
 
 @dataclass(eq=False)  # tracks are compared by identity (list membership, removal)
@@ -60,10 +61,20 @@ class Track:
     n_rt: int = 0
     confirmed: bool = False
     frames_without_e: int = 0
+    peak_z: float = float("nan")  # running mean of the frame's largest z within 1 px of the estimate
+    reported: bool = False  # confirmed and its peak z has reached min_peak_z
     path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
 
     def last_xy(self) -> tuple[float, float]:
         return self.path[-1][1], self.path[-1][2]
+
+
+def peak_z(z: np.ndarray, x: float, y: float) -> float:
+    """The largest z in the 3×3 pixels around (x, y) (σ units; NaN outside the image)."""
+    h, w = z.shape
+    cx, cy = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+    window = z[max(cy - 1, 0):max(cy + 2, 0), max(cx - 1, 0):max(cx + 2, 0)]
+    return float(window.max()) if window.size else float("nan")
 
 
 def icef(log_mtw: float, log_msw: float) -> float:
@@ -246,7 +257,7 @@ class SGDSPF:
         return self.whole_paths() if self.history else make_table(rows, TRACK_DTYPE)
 
     def whole_paths(self) -> np.ndarray:
-        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.confirmed
+        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.reported
                 for (f, x, y, vx, vy, i, c) in t.path]
         return make_table(rows, TRACK_DTYPE)
 
@@ -410,11 +421,24 @@ class SGDSPF:
                 t.n_rt += 1
                 if t.n_rt > p.T_rt:
                     t.confirmed = True
-            if t.confirmed and t.path[-1][0] == f:
+            if self._reportable(t, z) and t.path[-1][0] == f:
                 rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
         self._merge_duplicates()
         self._release_groups()
         return rows
+
+    def _reportable(self, t: Track, z: np.ndarray) -> bool:
+        """Confirmed, and (with min_peak_z > 0) its running peak z at least min_peak_z: a real-video
+        guard against confirmed clutter, which is fainter in z than the targets (docs/results/drone_ir.md)."""
+        if self.p.min_peak_z <= 0:
+            t.reported = t.reported or t.confirmed
+            return t.confirmed
+        value = peak_z(z, *t.last_xy())
+        if math.isfinite(value):
+            t.peak_z = value if not math.isfinite(t.peak_z) else t.peak_z + PEAK_RHO * (value - t.peak_z)
+        ok = t.confirmed and t.peak_z >= self.p.min_peak_z
+        t.reported = t.reported or ok
+        return ok
 
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends."""
@@ -426,7 +450,7 @@ class SGDSPF:
     def _end_track(self, t: Track) -> None:
         self.active.remove(t)
         self.ended_groups.append(t.group)
-        if t.confirmed and self.history:
+        if t.reported and self.history:
             self.finished.append(t)
 
     def _release_groups(self) -> None:

@@ -189,3 +189,29 @@ def test_reused_fields_give_the_same_tracks(method):
         del tracker  # its fields go back to the spare list
     assert len(tables_out[0]) > 10
     np.testing.assert_array_equal(tables_out[0], tables_out[1])
+
+
+def test_peak_z_is_the_3x3_maximum_and_nan_outside():
+    from tbd_taichi.sgds import peak_z
+
+    z = np.zeros((6, 7), np.float32)
+    z[2, 3], z[0, 0], z[5, 6] = 4.0, 9.0, -1.0
+    assert peak_z(z, 3.4, 1.6) == 4.0  # nearest pixel (3, 2); the 3×3 around it holds the 4
+    assert peak_z(z, 4.6, 2.0) == 0.0  # nearest (5, 2): the 4 at column 3 is 2 px away
+    assert peak_z(z, -0.4, 0.2) == 9.0  # the window is cut at the border
+    assert np.isnan(peak_z(z, -3.0, 2.0)) and np.isnan(peak_z(z, 2.0, 10.0))
+
+
+def test_min_peak_z_reports_only_tracks_that_bright():
+    """SNR 3 at 50×50: the target's running 3×3 peak z settles at 3.2 (measured), so min_peak_z = 2.5
+    reports the same rows as no gate and 4 reports nothing; the gate changes the output only."""
+    scene = tbd.simulate((50, 50), 40, 3.0, seed=5)
+    rows = {}
+    for gate in (0.0, 2.5, 4.0):
+        tracker = SGDSPF((50, 50), snr=3.0, seed=5, min_peak_z=gate)
+        rows[gate] = [row for frame in scene.frames for row in tracker.update(frame)]
+        rows[gate].append(len(tracker.finish()))
+    assert len(rows[0.0]) > 15 and rows[2.5] == rows[0.0]
+    assert rows[4.0] == [0]  # no online row and no whole path
+    with pytest.raises(tbd.ParameterError, match="min_peak_z"):
+        SGDSPF((50, 50), min_peak_z=-1.0)
