@@ -498,6 +498,28 @@ class ParticleKernels:
         self.store_counts(counts)
 
     @ti.kernel
+    def keep_particles(self, b: ti.i32, keep: ti.types.ndarray(dtype=ti.i8, ndim=1)):
+        """Remove particles in place: ``keep[k]`` for the k-th live particle in group-then-slot order
+        (the host's state order); each group's survivors move to the front of its slab in order and
+        its live count becomes their number (one pass per group, groups in parallel)."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):  # one task: each group's first index in state order (exclusive prefix of n)
+            s = 0
+            for h in range(self.n.shape[0]):
+                self.n_before[h] = s
+                s += self.n[h]
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            j = self.off[g]
+            for i in range(self.off[g], self.off[g] + self.n[g]):
+                if keep[self.n_before[g] + i - self.off[g]] != 0:
+                    if j != i:
+                        self.copy_state(b, i, b, j)
+                        self.e[b, j] = self.e[b, i]
+                    j += 1
+            self.n[g] = j - self.off[g]
+
+    @ti.kernel
     def read_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
                    x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
                    y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),

@@ -252,6 +252,16 @@ class ParticlePool:
         self.k.write_slots(self.buf, slots, *arrays, counts)
         self.counts = counts
 
+    def keep(self, keep) -> None:
+        """Remove particles: ``keep`` holds one flag per live particle in :meth:`state` order; the
+        survivors keep their order at the front of their group's slab (one launch)."""
+        keep = np.asarray(keep, dtype=bool).reshape(-1)
+        if keep.shape != (int(self.counts.sum()),):
+            raise ParameterError(f"need one keep flag per live particle ({int(self.counts.sum())}), got {keep.shape}")
+        self.k.keep_particles(self.buf, keep.view(np.int8))
+        self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[keep],
+                                  minlength=self.n_groups).astype(np.int32)
+
     # ------------------------------------------------------------ one step
 
     def load_frame(self, z: np.ndarray) -> None:

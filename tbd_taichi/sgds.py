@@ -354,7 +354,7 @@ class SGDSPF:
                 handed.append(members)
         self._start_tracks(f, st, handed, rng)
         self._update_index_image(st, keep, counts[inverse])
-        pool.load_states(st["group"][keep], {name: st[name][keep] for name in STATE})
+        pool.keep(keep)
 
     def _near_track(self, x: float, y: float) -> bool:
         return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)

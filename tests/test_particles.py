@@ -301,3 +301,22 @@ def test_same_results_with_one_and_two_threads(rng):
         tbd_taichi.init(TEST_ARCH)
     for key in one:
         np.testing.assert_array_equal(one[key], two[key])
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_keep_removes_particles_in_place_and_in_order(rng, engine):
+    """ParticlePool.keep against the host reference load_states(state[keep]); groups of all sizes, empty ones included."""
+    (t, n), _ = make_pools(rng)
+    pool = t if engine == "taichi" else n
+    pool.set_counts([700, 0, 37])
+    pool.predict(0)
+    before = pool.state()
+    keep = rng.random(len(before["x"])) < 0.6
+    keep[:5] = False  # the first slots go: the rest move down
+    pool.keep(keep)
+    after = pool.state()
+    np.testing.assert_array_equal(pool.counts, np.bincount(before["group"][keep], minlength=3))
+    for key in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "group"):
+        np.testing.assert_array_equal(after[key], before[key][keep], err_msg=key)
+    with pytest.raises(ParameterError, match="keep flag"):
+        pool.keep(np.ones(3, bool))

@@ -312,6 +312,17 @@ class NumpyParticleKernels:
             getattr(self, name)[b, slots] = value
         self.store_counts(counts)
 
+    def keep_particles(self, b: int, keep: np.ndarray) -> None:
+        start = 0
+        for g in range(len(self.off)):
+            off, n = int(self.off[g]), int(self.n[g])
+            kept = off + np.flatnonzero(keep[start:start + n])
+            for name in STATE:
+                arr = getattr(self, name)
+                arr[b, off:off + len(kept)] = arr[b, kept]
+            self.n[g] = len(kept)
+            start += n
+
     def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
         for name, out in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
             out[:] = getattr(self, name)[b, slots]
