@@ -48,7 +48,7 @@ MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
-PEAK_RHO = 0.1  # a track's running peak z: exponential mean with this weight on the newest frame
+PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight on the newest frame
 
 
 @dataclass(eq=False)  # tracks are compared by identity (list membership, removal)
@@ -61,7 +61,7 @@ class Track:
     n_rt: int = 0
     confirmed: bool = False
     frames_without_e: int = 0
-    peak_z: float = float("nan")  # running mean of the frame's largest z within 1 px of the estimate
+    peak_z: float = 0.0  # running mean (from 0) of the frame's largest z within 1 px of the estimate
     reported: bool = False  # confirmed and its peak z has reached min_peak_z
     path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
 
@@ -429,13 +429,15 @@ class SGDSPF:
 
     def _reportable(self, t: Track, z: np.ndarray) -> bool:
         """Confirmed, and (with min_peak_z > 0) its running peak z at least min_peak_z: a real-video
-        guard against confirmed clutter, which is fainter in z than the targets (docs/results/drone_ir.md)."""
+        guard against confirmed clutter, which is fainter in z than the targets (docs/results/drone_ir.md).
+        The running mean starts at 0, so a track must stay bright for about ten frames; short-lived
+        transients are not reported."""
         if self.p.min_peak_z <= 0:
             t.reported = t.reported or t.confirmed
             return t.confirmed
         value = peak_z(z, *t.last_xy())
         if math.isfinite(value):
-            t.peak_z = value if not math.isfinite(t.peak_z) else t.peak_z + PEAK_RHO * (value - t.peak_z)
+            t.peak_z += PEAK_RHO * (value - t.peak_z)
         ok = t.confirmed and t.peak_z >= self.p.min_peak_z
         t.reported = t.reported or ok
         return ok
