@@ -66,7 +66,7 @@ class ParticleKernels:
         self.logw, self.born, self.parent, self.cum, self.spc = f32(c), i32(c), i32(c), f64(c), f64(c)
         self.slot_group = i32(c)
         self.off, self.cap, self.n, self.n_out, self.kind = i32(g), i32(g), i32(g), i32(g), i32(g)
-        self.n_before = i32(g)
+        self.n_before, self.state_start = i32(g), i32(g)
         self.pb, self.pd, self.mu = f32(g), f32(g), f32(g)
         self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
         self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
@@ -506,13 +506,13 @@ class ParticleKernels:
         for _ in range(1):  # one task: each group's first index in state order (exclusive prefix of n)
             s = 0
             for h in range(self.n.shape[0]):
-                self.n_before[h] = s
+                self.state_start[h] = s
                 s += self.n[h]
         ti.loop_config(serialize=self.serial)
         for g in range(self.n.shape[0]):
             j = self.off[g]
             for i in range(self.off[g], self.off[g] + self.n[g]):
-                if keep[self.n_before[g] + i - self.off[g]] != 0:
+                if keep[self.state_start[g] + i - self.off[g]] != 0:
                     if j != i:
                         self.copy_state(b, i, b, j)
                         self.e[b, j] = self.e[b, i]
