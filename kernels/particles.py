@@ -431,10 +431,13 @@ class ParticleKernels:
             if self.n[g] > 0 and self.tile_start[t] < self.out_tile_end(t):
                 last = self.off[g] + self.n[g] - 1
                 p = -1
+                u0 = ti.cast(0.0, ti.f64)  # systematic: one uniform per group
+                if ti.static(systematic):
+                    u0 = uniform_f64_at(key, g)
                 for i in range(self.tile_start[t], self.out_tile_end(t)):
                     u = ti.cast(0.0, ti.f64)
                     if ti.static(systematic):
-                        u = (ti.cast(i - self.off[g], ti.f64) + uniform_f64_at(key, g)) / ti.cast(self.n_out[g], ti.f64)
+                        u = (ti.cast(i - self.off[g], ti.f64) + u0) / ti.cast(self.n_out[g], ti.f64)
                     else:
                         u = (self.tile_spc_prefix[t] + self.spc[i]) / self.gspc[g]
                     v = u * self.gtotal[g]

@@ -11,6 +11,7 @@ import numpy as np
 from . import backend, metrics, tables
 from .background import BACKGROUNDS, DEFAULT_BACKGROUND, REAL_VIDEO
 from .errors import TBDError
+from .params import SGDSParams
 from .progress import progress_bar
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
@@ -70,7 +71,8 @@ def cmd_track(args) -> int:
     from .sgds import MIN_FRAMES, make_tracker
 
     source = io.open_frames(args.input)
-    preset = REAL_VIDEO if args.real_video else dict(background=DEFAULT_BACKGROUND, snr=1.4, min_peak_z=0.0)
+    preset = REAL_VIDEO if args.real_video else \
+        dict(background=DEFAULT_BACKGROUND, snr=SGDSParams.snr, min_peak_z=SGDSParams.min_peak_z)
     chosen = {name: getattr(args, name) if getattr(args, name) is not None else value for name, value in preset.items()}
     if args.method == "pf":
         method_only = dict(n_particles=args.particles, threshold=args.threshold)

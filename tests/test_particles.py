@@ -65,7 +65,7 @@ def test_every_stage_matches_the_numpy_twin(rng):
         n._put("logw", t._get("logw"))  # the contract: the same weights give the same parents
         n.normalise()
         for pool in (t, n):
-            pool.resample(frame, n_out=[600, 1500, 100])
+            pool.resample(frame, n_out=[600, 1500, 100], systematic=frame == 1)  # frame 1: systematic
         np.testing.assert_array_equal(t._get("parent")[:2300], n._get("parent")[:2300])
         assert_states_match(t, n)
     et, en = t.estimates(), n.estimates()

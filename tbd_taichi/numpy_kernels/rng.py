@@ -68,12 +68,12 @@ def normal(seed, frame, stream, index) -> np.ndarray:
             u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN))).astype(np.float64)
         in_tail = tail[todo]
         i = (h & _U32(ZIG_LAYERS - 1)).astype(np.int64)
-        x = unit_from_bits(h) * ZIG_W[i]
+        u = unit_from_bits(h)
+        x = u * ZIG_W[i]
         fast = ~in_tail & ((h >> _U32(9)) < ZIG_K[i])
         x64 = x.astype(np.float64)
-        wedge = ~in_tail & ~fast & (i > 0) & (ZIG_PHI[i] + u2 * (ZIG_PHI[np.minimum(i + 1, ZIG_LAYERS)] - ZIG_PHI[i])
-                                              < np.exp(-0.5 * x64 * x64))
-        xt = -np.log(unit_from_bits(h).astype(np.float64)) / ZIG_R
+        wedge = ~in_tail & ~fast & (i > 0) & (ZIG_PHI[i] + u2 * (ZIG_PHI[i + 1] - ZIG_PHI[i]) < np.exp(-0.5 * x64 * x64))
+        xt = -np.log(u.astype(np.float64)) / ZIG_R
         tail_ok = in_tail & (-2.0 * np.log(u2) > xt * xt)
         x = np.where(in_tail, (ZIG_R + xt).astype(np.float32), x)
         x = np.where((h & _U32(128)) != 0, -x, x)
