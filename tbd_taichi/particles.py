@@ -41,6 +41,11 @@ STATE = tuple(name for name, _ in STATE_DTYPES[:-1])  # a particle's state (all 
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 
 
+def one_thread_per_slot(arch: str) -> bool:
+    """Kernel layout: one thread per particle slot (GPUs) or one task per tile of slots (the CPU)."""
+    return arch != "cpu"
+
+
 @dataclass
 class GroupEstimates:
     """Per-group estimates after a step (arrays of length G; NaN where a group has no E = 1 particle)."""
@@ -89,14 +94,15 @@ class ParticlePool:
         gt0 = np.searchsorted(tile_group, np.arange(self.n_groups)).astype(np.int32)
         gt1 = np.searchsorted(tile_group, np.arange(self.n_groups), side="right").astype(np.int32)
         self.map_capacity = max(int(map_capacity), 1)
-        serial = self.capacity <= SERIAL_PARTICLES
+        serial, flat = self.capacity <= SERIAL_PARTICLES, False
         if engine == "taichi":
             backend.ensure_init(arch)
-            serial = serial and backend.current().arch == "cpu"
+            flat = one_thread_per_slot(backend.current().arch)
+            serial = serial and not flat
             from .kernels.particles import ParticleKernels as Kernels
         else:
             from .numpy_kernels.particles import NumpyParticleKernels as Kernels
-        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial)
+        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat)
         self.k = backend.reusable(self, ("particles",) + dims, lambda: Kernels(*dims)) if engine == "taichi" \
             else Kernels(*dims)
         slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)

@@ -303,6 +303,39 @@ def test_same_results_with_one_and_two_threads(rng):
         np.testing.assert_array_equal(one[key], two[key])
 
 
+def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):
+    """The one-thread-per-slot layout that GPUs use, run on the CPU, against the tiled CPU layout:
+    every stage, multinomial and systematic resampling, a top-up, copies and an empty group."""
+    import tbd_taichi.particles as particles
+
+    states = random_states(rng, CAPS, SHAPE)
+    z = rng.standard_normal(SHAPE).astype(np.float32)
+
+    def run():
+        p = ParticlePool(CAPS, SHAPE, engine="taichi", seed=3, map_capacity=8)
+        p.configure_groups([0], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([1], "map", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([2], "copy", pb=0.3, pd=0.2)
+        p.set_proposal_map({1: (np.array([5, 40, 300]), np.array([0.2, 0.5, 0.3]))})
+        p.set_state(states)
+        out = []
+        for f in range(4):
+            p.load_frame(z)
+            p.predict(f, top_up=[700, 1500, 300] if f == 1 else None)
+            p.weigh()
+            p.resample(f, n_out=[650, 0 if f == 2 else 1400, 300], systematic=f == 3)
+            out.append((p.state(), p.estimates().x))
+        return out
+
+    tiled = run()
+    monkeypatch.setattr(particles, "one_thread_per_slot", lambda arch: True)
+    flat = run()
+    for (st, xt), (sf, xf) in zip(tiled, flat):
+        for key in st:
+            np.testing.assert_array_equal(st[key], sf[key], err_msg=key)
+        np.testing.assert_array_equal(xt, xf)
+
+
 @pytest.mark.parametrize("engine", ["taichi", "numpy"])
 def test_keep_removes_particles_in_place_and_in_order(rng, engine):
     """ParticlePool.keep against the host reference load_states(state[keep]); groups of all sizes, empty ones included."""

@@ -32,7 +32,8 @@ def psf_samples(d0: np.ndarray, inv2s2, step, pixels: np.ndarray, size: int) -> 
 class NumpyParticleKernels:
     """Arrays and vectorised steps of one particle pool (same names as the Taichi class)."""
 
-    def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool):
+    def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
+                 flat: bool):
         c, g = capacity, n_groups
         self.capacity = capacity
         for name in ("x", "vx", "y", "vy", "inten"):
