@@ -15,6 +15,7 @@ import math
 
 import taichi as ti
 
+from .populations import PopulationKernels
 from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 TILE = 1024
@@ -53,7 +54,7 @@ def psf_samples(d0: ti.f32, inv2s2: ti.f32, step: ti.f32, p0: ti.i32, size: ti.i
 
 
 @ti.data_oriented
-class ParticleKernels:
+class ParticleKernels(PopulationKernels):
     """Fields and kernels of one particle pool; the scheduler is ``tbd_taichi.particles.ParticlePool``."""
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
@@ -83,6 +84,7 @@ class ParticleKernels:
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.label = i32(*frame_shape)
+        self.pixel_key = ti.field(ti.i64, shape=frame_shape)  # populations: the index image's winner
         self.normal = NormalTables()
 
     # ------------------------------------------------------------ helpers
@@ -576,14 +578,15 @@ class ParticleKernels:
     @ti.kernel
     def keep_particles(self, b: ti.i32, keep: ti.types.ndarray(dtype=ti.i8, ndim=1)):
         """Remove particles in place: ``keep[k]`` for the k-th live particle in group-then-slot order
-        (the host's state order); each group's survivors move to the front of its slab in order and
-        its live count becomes their number (one pass per group, groups in parallel)."""
-        ti.loop_config(serialize=True)
-        for _ in range(1):  # one task: each group's first index in state order (exclusive prefix of n)
-            s = 0
-            for h in range(self.n.shape[0]):
-                self.state_start[h] = s
-                s += self.n[h]
+        (the host's state order)."""
+        self.state_starts()
+        self.compact(b, keep)
+
+    @ti.func
+    def compact(self, b: ti.i32, keep: ti.template()):
+        """Each group's particles with keep[s] ≠ 0 (s: state order, after ``state_starts``) move to
+        the front of its slab in order and its live count becomes their number (one pass per group,
+        groups in parallel)."""
         ti.loop_config(serialize=self.serial)
         for g in range(self.n.shape[0]):
             j = self.off[g]

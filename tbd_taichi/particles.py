@@ -268,6 +268,73 @@ class ParticlePool:
         self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[keep],
                                   minlength=self.n_groups).astype(np.int32)
 
+    # ------------------------------------------------------------ particle populations (SGDS-PF Eqs. 36–38)
+
+    def seq_in_state_order(self) -> np.ndarray:
+        """The Seq (particle-population label, Eq. 36) of every live particle, in :meth:`state` order."""
+        seq = np.empty(int(self.counts.sum()), np.int32)
+        if len(seq):
+            self.k.read_seq(self.buf, seq)
+        return seq
+
+    def states_at(self, index) -> dict:
+        """Like :meth:`state`, for the live particles at positions ``index`` of the state order."""
+        index = np.asarray(index, dtype=np.int64).reshape(-1)
+        group = np.repeat(np.arange(self.n_groups), self.counts)[index]
+        slots = (self.off[group] + index - (np.cumsum(self.counts) - self.counts)[group]).astype(np.int32)
+        out = {name: np.empty(len(slots), dtype) for name, dtype in STATE_DTYPES}
+        if len(slots):
+            self.k.read_slots(self.buf, slots, *out.values())
+        out.update(group=group, slot=slots.astype(np.int64))
+        return out
+
+    def eliminate(self, pp, size, take, phase) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 37 on the device: particle s (state order) belongs to population pp[s] of ``size[k]``
+        particles, ``take[k]`` of which go, spread over the population by ``phase[k]`` ∈ [0, 1).
+        Returns the survivors' flags (state order) and per population the sums over survivors
+        (columns ``kernels.populations.P_*``: count, count with E = 1, Σ Tp, Σ x and Σ y with E = 1).
+        The pool is unchanged until :meth:`hand_over`."""
+        from .kernels.populations import N_PP_SUMS
+
+        pp, size, take, phase = self._population_arrays(pp, size, take, phase)
+        keep = np.zeros(len(pp), np.int8)
+        sums = np.zeros((len(size), N_PP_SUMS))
+        if len(pp):
+            self.k.eliminate(self.buf, pp, size, take, phase, np.zeros(len(size), np.int32), keep, sums)
+        return keep.astype(bool), sums
+
+    def hand_over(self, pp, size, keep, drop, index: np.ndarray) -> None:
+        """Remove the particles not in ``keep`` and those of the populations flagged in ``drop``;
+        write the index image P_pp (Eq. 36) into ``index`` (H, W, int32): each pixel gets the Seq
+        of the kept particles in it, those of the larger population (``size``) winning, then the
+        later in state order (0: none)."""
+        pp, size, _, _ = self._population_arrays(pp, size)
+        keep = np.ascontiguousarray(keep, dtype=np.int8)
+        drop = np.ascontiguousarray(drop, dtype=np.int8)
+        if index.shape != self.frame_shape or index.dtype != np.int32 or not index.flags.c_contiguous:
+            raise ParameterError(f"index image must be a C-contiguous int32 array of shape {self.frame_shape}")
+        if keep.shape != pp.shape or drop.shape != size.shape:
+            raise ParameterError("need one keep flag per particle and one drop flag per population")
+        if not len(pp):
+            index[...] = 0
+            return
+        self.k.hand_over(self.buf, pp, size, drop, keep, index)
+        kept = (keep != 0) & (drop[pp] == 0)
+        self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[kept],
+                                  minlength=self.n_groups).astype(np.int32)
+
+    def _population_arrays(self, pp, size, take=None, phase=None):
+        """Checked, contiguous population arrays: pp (one per live particle, < len(size)), size, take, phase."""
+        pp = np.ascontiguousarray(pp, dtype=np.int32).reshape(-1)
+        size = np.ascontiguousarray(size, dtype=np.int32).reshape(-1)
+        if pp.shape != (int(self.counts.sum()),):
+            raise ParameterError(f"need one population index per live particle ({int(self.counts.sum())}), got {pp.shape}")
+        if len(pp) and (pp.min() < 0 or pp.max() >= len(size)):
+            raise ParameterError(f"population indices must lie in [0, {len(size)})")
+        take = None if take is None else np.ascontiguousarray(take, dtype=np.int32).reshape(-1)
+        phase = None if phase is None else np.ascontiguousarray(phase, dtype=np.float64).reshape(-1)
+        return pp, size, take, phase
+
     # ------------------------------------------------------------ one step
 
     def load_frame(self, z: np.ndarray) -> None:

@@ -110,12 +110,6 @@ def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
 
 
-def stable_order(keys: np.ndarray) -> np.ndarray:
-    """Stable argsort of non-negative integer ``keys``; radix sort (O(n)) when they fit in 16 bits."""
-    small = len(keys) == 0 or int(keys.max()) < 1 << 16
-    return np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
-
-
 def dense_ranks(values: np.ndarray, table_limit: int = 1 << 22) -> tuple[np.ndarray, int]:
     """Rank of each integer among the distinct values (0 … k − 1, in value order), and k.
     A lookup table replaces the sort when the values span at most ``table_limit``."""
@@ -153,25 +147,6 @@ def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_bloc
     take = np.empty_like(counts)
     take[order] = np.clip(per_block - before, 0, c)
     return take
-
-
-def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: np.ndarray) -> np.ndarray:
-    """Eq. 37's random elimination of ``take`` of a PP's ``size`` particles, spread evenly over its
-    resampled order: the particle of rank r goes iff ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋,
-    q = ⌊phase·size⌋ (phase ~ U(0, 1) per PP).  Exactly ``take`` go, each with probability take/size.
-    Resampled particles sit next to their siblings (sorted parents), so a contiguous subset would
-    remove whole families."""
-    q = np.minimum((phase * size).astype(np.int64), size - 1)
-    return ((rank + 1) * take + q) // size > (rank * take + q) // size
-
-
-def rank_in_population(inverse: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """0-based position of each particle among its PP's particles, in slot order."""
-    order = stable_order(inverse)
-    start = np.cumsum(counts) - counts
-    rank = np.empty_like(inverse)
-    rank[order] = np.arange(len(inverse)) - start[inverse[order]]
-    return rank
 
 
 class SGDSPF:
@@ -327,68 +302,59 @@ class SGDSPF:
     def _eliminate_and_hand_over(self, f: int) -> None:
         """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp.
 
-        A PP is a (block, Seq) pair; all PPs of all blocks are handled at once with sorts and
-        ``np.bincount`` (no loop over blocks or PPs)."""
+        A PP is a (block, Seq) pair.  The host numbers the PPs of all blocks at once and decides the
+        quotas and hand-overs; the per-particle work runs on the pool (``ParticlePool.eliminate`` and
+        ``hand_over``), so only the handed-over particles' states come to the host."""
+        from .kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+
         p, pool = self.p, self.search
-        st = pool.state()
-        pp_block, inverse, counts = populations(st["group"], st["seq"])
+        group = np.repeat(np.arange(pool.n_groups), pool.counts)
+        pp_block, inverse, counts = populations(group, pool.seq_in_state_order())
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
-        keep = ~spread_removal(rank_in_population(inverse, counts), counts[inverse], take[inverse],
-                               rng.random(len(counts))[inverse])
-        e = (st["e"] == 1) & keep
-        n_pp = np.bincount(inverse, weights=keep, minlength=len(counts))
-        ne = np.bincount(inverse, weights=e, minlength=len(counts))
-        tp_sum = np.bincount(inverse, weights=np.where(keep, st["tp"], 0), minlength=len(counts))
+        keep, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))
+        n_pp, ne = sums[:, P_KEPT], sums[:, P_KEPT_E]
         with np.errstate(invalid="ignore", divide="ignore"):
-            pe, ptp = ne / n_pp, tp_sum / n_pp  # Eq. 38 (PE = ΣE/N_pp)
-            px = np.bincount(inverse, weights=np.where(e, st["x"], 0), minlength=len(counts)) / ne
-            py = np.bincount(inverse, weights=np.where(e, st["y"], 0), minlength=len(counts)) / ne
+            pe, ptp = ne / n_pp, sums[:, P_TP] / n_pp  # Eq. 38 (PE = ΣE/N_pp)
+            px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
+        drop = np.zeros(len(counts), bool)
         handed = []
         for k in np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0)):
-            members = np.flatnonzero((inverse == k) & keep)
             if self._near_track(px[k], py[k]):  # the target is tracked already
-                keep[members] = False
+                drop[k] = True
             elif len(handed) < len(self.free_groups):
-                keep[members] = False
-                handed.append(members)
-        self._start_tracks(f, st, handed, rng)
-        self._update_index_image(st, keep, counts[inverse])
-        pool.keep(keep)
+                drop[k] = True
+                handed.append(np.flatnonzero((inverse == k) & keep))
+        members = pool.states_at(np.concatenate(handed)) if handed else None
+        pool.hand_over(inverse, counts, keep, drop, self.pp_index)
+        self._start_tracks(f, members, [len(m) for m in handed], rng)
 
     def _near_track(self, x: float, y: float) -> bool:
         return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)
 
-    def _start_tracks(self, f: int, st: dict, handed: list, rng: np.random.Generator) -> None:
+    def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator) -> None:
+        """A tracking PF for each handed-over PP: ``members`` holds their particles' states, PP after
+        PP (``sizes`` each), resized to N_tpf particles (Algorithm 2)."""
         n_tpf = self.p.N_tpf
         new_states = {}
-        for members in handed:
+        for start, size in zip(np.cumsum(sizes) - sizes, sizes):
             if not self.free_groups:
                 break
-            e = st["e"][members] == 1
-            x, y = float(st["x"][members][e].mean()), float(st["y"][members][e].mean())
+            st = {name: members[name][start:start + size] for name in STATE}
+            e = st["e"] == 1
+            x, y = float(st["x"][e].mean()), float(st["y"][e].mean())
             if self._near_track(x, y):
                 continue
-            pick = members[resize_population(len(members), n_tpf, rng.random(max(n_tpf, len(members))))]
+            pick = resize_population(size, n_tpf, rng.random(max(n_tpf, size)))
             group = self.free_groups.pop()
             new_states[group] = {name: st[name][pick] for name in STATE}
             track = Track(self.next_track_id, group, path=deque(maxlen=None if self.history else 1))
             self.next_track_id += 1
-            track.path.append((f, x, y, float(st["vx"][members][e].mean()), float(st["vy"][members][e].mean()),
-                               float(st["inten"][members][e].mean()), 1.0))
+            track.path.append((f, x, y, float(st["vx"][e].mean()), float(st["vy"][e].mean()),
+                               float(st["inten"][e].mean()), 1.0))
             self.active.append(track)
         if new_states:
             self.tracks_pool.set_state(new_states)
-
-    def _update_index_image(self, st: dict, keep: np.ndarray, pp_size: np.ndarray) -> None:
-        """P_pp: each pixel gets the PP whose particles fall in it; the larger PP (``pp_size`` per particle) wins."""
-        h, w = self.shape
-        self.pp_index[:] = 0
-        x = np.floor(st["x"] + 0.5).astype(np.int64)
-        y = np.floor(st["y"] + 0.5).astype(np.int64)
-        inside = keep & (x >= 0) & (x < w) & (y >= 0) & (y < h) & (st["seq"] > 0)
-        order = stable_order(pp_size[inside])  # larger PPs written last win
-        self.pp_index[y[inside][order], x[inside][order]] = st["seq"][inside][order]
 
     def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
         p, pool = self.p, self.tracks_pool

@@ -7,7 +7,8 @@ import pytest
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.errors import InputError
-from tbd_taichi.sgds import SGDSPF, icef, resize_population, scef, spread_removal, update_confidence
+from tbd_taichi.numpy_kernels.populations import spread_removal
+from tbd_taichi.sgds import SGDSPF, icef, resize_population, scef, update_confidence
 
 
 def run(shape, frames, snr, seed, engine="taichi"):

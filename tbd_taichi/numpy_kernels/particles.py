@@ -13,6 +13,7 @@ from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, 
                                   S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI)
 from ..particles import STATE
 from . import rng
+from .populations import NumpyPopulationKernels
 
 F32 = np.float32
 
@@ -29,7 +30,7 @@ def psf_samples(d0: np.ndarray, inv2s2, step, pixels: np.ndarray, size: int) -> 
     return np.where((pixels >= 0) & (pixels < size), g, F32(0))
 
 
-class NumpyParticleKernels:
+class NumpyParticleKernels(NumpyPopulationKernels):
     """Arrays and vectorised steps of one particle pool (same names as the Taichi class)."""
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,

@@ -1,0 +1,123 @@
+"""Particle-population bookkeeping of SGDS-PF's searching PF (Eqs. 36–38) on the particle pool.
+
+A particle population (PP) is the set of a block's particles that share a Seq (Eq. 36).  The
+host numbers the PPs (block, then Seq) and decides Eq. 37's quotas and the hand-over; these
+kernels do the per-particle work on the pool's own fields, so the particles' states never go
+to the host:
+
+* :meth:`PopulationKernels.eliminate`: Eq. 37's spread-out random elimination of ``take`` of a
+  PP's particles, and Eq. 38's sums over the survivors;
+* :meth:`PopulationKernels.hand_over`: drops whole PPs (handed over, or already tracked), writes
+  the index image P_pp and compacts the pool.
+
+Particles are addressed in *state order* (group, then slot), as ``ParticlePool.state`` lists
+them.  A mixin of ``ParticleKernels`` (it uses the pool's fields); the NumPy twin is
+``tbd_taichi.numpy_kernels.populations``.
+"""
+import taichi as ti
+
+# columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
+P_KEPT, P_KEPT_E, P_TP, P_X, P_Y = range(5)
+N_PP_SUMS = 5
+
+
+@ti.data_oriented
+class PopulationKernels:
+    """Eqs. 37–38 over the pool; needs the ``ParticleKernels`` fields and a per-pixel ``pixel_key`` (i64)."""
+
+    @ti.func
+    def state_starts(self):
+        """state_start[g]: index of group g's first live particle in state order (prefix of n)."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):  # one task
+            s = 0
+            for h in range(self.n.shape[0]):
+                self.state_start[h] = s
+                s += self.n[h]
+
+    @ti.kernel
+    def eliminate(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  size: ti.types.ndarray(dtype=ti.i32, ndim=1), take: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  phase: ti.types.ndarray(dtype=ti.f64, ndim=1), seen: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  keep: ti.types.ndarray(dtype=ti.i8, ndim=1), sums: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """Eq. 37 and Eq. 38's sums.  Particle s (state order) of PP k = pp[s] is the r-th of its PP in
+        slot order (``seen`` counts them; pass zeros); it goes iff ⌊((r+1)·take + q)/size⌋ >
+        ⌊(r·take + q)/size⌋ with q = min(⌊phase·size⌋, size − 1), so exactly take_k of size_k go,
+        spread evenly over the PP's resampled order.  keep[s] ← 1 for survivors; sums[k] ← (survivors,
+        survivors with E = 1, Σ Tp over survivors, Σ x and Σ y over survivors with E = 1), added in
+        state order (f64).  A PP lies in one group, so groups run in parallel."""
+        self.state_starts()
+        ti.loop_config(serialize=True)
+        for k, c in ti.ndrange(sums.shape[0], sums.shape[1]):
+            sums[k, c] = 0.0
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            s0, off = self.state_start[g], self.off[g]
+            for i in range(off, off + self.n[g]):
+                s = s0 + i - off
+                k = pp[s]
+                r = ti.cast(seen[k], ti.i64)
+                seen[k] += 1
+                n_k, t_k = ti.cast(size[k], ti.i64), ti.cast(take[k], ti.i64)
+                q = ti.min(ti.cast(phase[k] * ti.cast(n_k, ti.f64), ti.i64), n_k - 1)
+                kept = ((r + 1) * t_k + q) // n_k <= (r * t_k + q) // n_k
+                keep[s] = ti.cast(kept, ti.i8)
+                if kept:
+                    sums[k, P_KEPT] += 1.0
+                    sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
+                    if self.e[b, i] == 1:
+                        sums[k, P_KEPT_E] += 1.0
+                        sums[k, P_X] += ti.cast(self.x[b, i], ti.f64)
+                        sums[k, P_Y] += ti.cast(self.y[b, i], ti.f64)
+
+    @ti.func
+    def index_pixel(self, b: ti.i32, i: ti.i32) -> ti.i32:
+        """Flat pixel y·W + x of the particle in slot i (nearest pixel), or −1 outside the image."""
+        h, w = ti.static(self.label.shape[0], self.label.shape[1])
+        x = ti.cast(ti.floor(self.x[b, i] + 0.5), ti.i32)
+        y = ti.cast(ti.floor(self.y[b, i] + 0.5), ti.i32)
+        return ti.select(0 <= x < w and 0 <= y < h, y * w + x, -1)
+
+    @ti.kernel
+    def hand_over(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  size: ti.types.ndarray(dtype=ti.i32, ndim=1), drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
+                  keep: ti.types.ndarray(dtype=ti.i8, ndim=1), index: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """keep[s] ← 0 for the particles of dropped PPs (drop[pp[s]]); the index image P_pp (Eq. 36):
+        each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the larger PP (size)
+        winning, then the later in state order; the kept particles move to the front of their slabs."""
+        self.state_starts()
+        h, w = ti.static(self.label.shape[0], self.label.shape[1])
+        ti.loop_config(serialize=self.serial)
+        for y, x in ti.ndrange(h, w):
+            self.pixel_key[y, x] = -1
+            index[y, x] = 0
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            s0, off = self.state_start[g], self.off[g]
+            for i in range(off, off + self.n[g]):
+                s = s0 + i - off
+                if drop[pp[s]] != 0:
+                    keep[s] = ti.i8(0)
+                p = self.index_pixel(b, i)
+                if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
+                    ti.atomic_max(self.pixel_key[p // w, p % w], (ti.cast(size[pp[s]], ti.i64) << 32) + s)
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            s0, off = self.state_start[g], self.off[g]
+            for i in range(off, off + self.n[g]):
+                s = s0 + i - off
+                p = self.index_pixel(b, i)
+                if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
+                    if self.pixel_key[p // w, p % w] == (ti.cast(size[pp[s]], ti.i64) << 32) + s:
+                        index[p // w, p % w] = self.seq[b, i]
+        self.compact(b, keep)
+
+    @ti.kernel
+    def read_seq(self, b: ti.i32, seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """The Seq of every live particle, in state order."""
+        self.state_starts()
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            s0, off = self.state_start[g], self.off[g]
+            for i in range(off, off + self.n[g]):
+                seq[s0 + i - off] = self.seq[b, i]

@@ -1,0 +1,73 @@
+"""NumPy twin of ``tbd_taichi.kernels.populations`` (Eqs. 36–38 on the particle pool), vectorised.
+
+The per-PP sums are ``np.bincount`` sums, which add in state order as the kernel does, so both
+give the same bits.  A mixin of ``NumpyParticleKernels``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+
+
+def stable_order(keys: np.ndarray) -> np.ndarray:
+    """Stable argsort of non-negative integer ``keys``; radix sort (O(n)) when they fit in 16 bits."""
+    small = len(keys) == 0 or int(keys.max()) < 1 << 16
+    return np.argsort(keys.astype(np.uint16) if small else keys, kind="stable")
+
+
+def rank_in_population(inverse: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """0-based position of each particle among its PP's particles, in state order."""
+    order = stable_order(inverse)
+    start = np.cumsum(counts) - counts
+    rank = np.empty_like(inverse)
+    rank[order] = np.arange(len(inverse)) - start[inverse[order]]
+    return rank
+
+
+def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """Eq. 37's random elimination of ``take`` of a PP's ``size`` particles, spread evenly over its
+    resampled order: the particle of rank r goes iff ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋,
+    q = ⌊phase·size⌋ (phase ~ U(0, 1) per PP).  Exactly ``take`` go, each with probability take/size.
+    Resampled particles sit next to their siblings (sorted parents), so a contiguous subset would
+    remove whole families."""
+    size, take = size.astype(np.int64), take.astype(np.int64)
+    q = np.minimum((phase * size).astype(np.int64), size - 1)
+    return ((rank + 1) * take + q) // size > (rank * take + q) // size
+
+
+class NumpyPopulationKernels:
+    """Twin of ``PopulationKernels``; uses the ``NumpyParticleKernels`` arrays."""
+
+    def state_slots(self) -> np.ndarray:
+        """Slots of the live particles in state order (group, then slot)."""
+        return np.concatenate([np.arange(o, o + n) for o, n in zip(self.off, self.n)]).astype(np.int64)
+
+    def eliminate(self, b, pp, size, take, phase, seen, keep, sums) -> None:
+        slots = self.state_slots()
+        n_pp = len(size)
+        keep[:] = ~spread_removal(rank_in_population(pp.astype(np.int64), size), size[pp], take[pp], phase[pp])
+        seen[:] += np.bincount(pp, minlength=n_pp).astype(seen.dtype)
+        kept = keep.astype(bool)
+        with_e = kept & (self.e[b, slots] == 1)
+        sums[:, P_KEPT] = np.bincount(pp, weights=kept, minlength=n_pp)
+        sums[:, P_KEPT_E] = np.bincount(pp, weights=with_e, minlength=n_pp)
+        sums[:, P_TP] = np.bincount(pp, weights=np.where(kept, self.tp[b, slots], 0), minlength=n_pp)
+        sums[:, P_X] = np.bincount(pp, weights=np.where(with_e, self.x[b, slots], 0), minlength=n_pp)
+        sums[:, P_Y] = np.bincount(pp, weights=np.where(with_e, self.y[b, slots], 0), minlength=n_pp)
+
+    def hand_over(self, b, pp, size, drop, keep, index) -> None:
+        slots = self.state_slots()
+        keep[drop[pp] != 0] = 0
+        h, w = index.shape
+        x = np.floor(self.x[b, slots] + np.float32(0.5)).astype(np.int64)
+        y = np.floor(self.y[b, slots] + np.float32(0.5)).astype(np.int64)
+        seq = self.seq[b, slots]
+        inside = (keep != 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h) & (seq > 0)
+        order = stable_order(size[pp][inside])  # larger PPs written last win, then later particles
+        index[:] = 0
+        index[y[inside][order], x[inside][order]] = seq[inside][order]
+        self.keep_particles(b, keep)
+
+    def read_seq(self, b, seq) -> None:
+        seq[:] = self.seq[b, self.state_slots()]

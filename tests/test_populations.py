@@ -1,0 +1,121 @@
+"""Eq. 37–38 population kernels (ParticlePool.eliminate / hand_over): Taichi against the NumPy twin and
+against a direct host reference."""
+import numpy as np
+import pytest
+
+from tbd_taichi.errors import ParameterError
+from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+from tbd_taichi.numpy_kernels.populations import spread_removal
+from tbd_taichi.particles import ParticlePool
+from tbd_taichi.sgds import eliminated_per_population, populations
+
+SHAPE = (19, 27)
+CAPS = [900, 40, 1300, 5]
+
+
+def make_pool(engine, rng_seed=0):
+    """Groups of several sizes (one empty), Seq labels 0…7 with a large one, positions also outside the image."""
+    rng = np.random.default_rng(rng_seed)
+    pool = ParticlePool(CAPS, SHAPE, engine=engine, seed=2)
+    counts = [700, 0, 1300, 5]
+    states = {}
+    for g, n in enumerate(counts):
+        if n:
+            seq = rng.choice(np.array([0, 1, 2, 3, 5, 8, 13, 100_000], np.int32), n)
+            states[g] = dict(x=rng.uniform(-2, SHAPE[1] + 1, n), y=rng.uniform(-2, SHAPE[0] + 1, n),
+                             vx=rng.uniform(-1, 1, n), vy=rng.uniform(-1, 1, n), inten=rng.uniform(1, 9, n),
+                             e=(rng.random(n) < 0.7).astype(np.int32), tp=rng.integers(1, 9, n), seq=seq)
+    pool.set_state(states)
+    return pool
+
+
+def host_reference(st, inverse, counts, take, phase, drop, shape):
+    """Eqs. 37–38 and P_pp written out directly on the host state."""
+    order = np.argsort(inverse, kind="stable")
+    rank = np.empty_like(inverse)
+    rank[order] = np.arange(len(inverse)) - (np.cumsum(counts) - counts)[inverse[order]]
+    keep = ~spread_removal(rank, counts[inverse], take[inverse], phase[inverse])
+    sums = np.zeros((len(counts), 5))
+    for s in range(len(inverse)):  # one particle at a time, in state order
+        if keep[s]:
+            k = inverse[s]
+            sums[k, P_KEPT] += 1
+            sums[k, P_TP] += st["tp"][s]
+            if st["e"][s] == 1:
+                sums[k, P_KEPT_E] += 1
+                sums[k, P_X] += np.float64(st["x"][s])
+                sums[k, P_Y] += np.float64(st["y"][s])
+    final = keep & ~drop[inverse]
+    index = np.zeros(shape, np.int32)
+    best = {}
+    for s in np.flatnonzero(final):
+        x, y = int(np.floor(st["x"][s] + np.float32(0.5))), int(np.floor(st["y"][s] + np.float32(0.5)))
+        if 0 <= x < shape[1] and 0 <= y < shape[0] and st["seq"][s] > 0:
+            key = (counts[inverse[s]], s)
+            if key > best.get((y, x), (-1, -1)):
+                best[(y, x)] = key
+                index[y, x] = st["seq"][s]
+    return keep, sums, final, index
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_eliminate_and_hand_over_match_the_host_reference(engine):
+    pool = make_pool(engine)
+    st = pool.state()
+    np.testing.assert_array_equal(pool.seq_in_state_order(), st["seq"])
+    pp_block, inverse, counts = populations(st["group"], st["seq"])
+    take = eliminated_per_population(pp_block, counts, 300)
+    take[0], take[-1] = 0, counts[-1]  # none and all of a population go
+    rng = np.random.default_rng(7)
+    phase = rng.random(len(counts))
+    phase[1] = 0.0
+    drop = rng.random(len(counts)) < 0.3
+    keep_ref, sums_ref, final_ref, index_ref = host_reference(st, inverse, counts, take, phase, drop, SHAPE)
+    keep, sums = pool.eliminate(inverse, counts, take, phase)
+    np.testing.assert_array_equal(keep, keep_ref)
+    np.testing.assert_array_equal(sums, sums_ref)  # same order of f64 additions: same bits
+    np.testing.assert_array_equal(np.bincount(inverse, weights=~keep, minlength=len(counts)), take)  # Eq. 37 quotas
+    index = np.full(SHAPE, -5, np.int32)
+    pool.hand_over(inverse, counts, keep, drop, index)
+    np.testing.assert_array_equal(index, index_ref)
+    after = pool.state()
+    for key in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "group"):
+        np.testing.assert_array_equal(after[key], st[key][final_ref], err_msg=key)
+    np.testing.assert_array_equal(pool.counts, np.bincount(st["group"][final_ref], minlength=len(CAPS)))
+
+
+def test_states_at_reads_the_chosen_particles():
+    pool = make_pool("taichi", rng_seed=3)
+    st = pool.state()
+    pick = np.array([0, 5, 699, 700, 1999, 2004])
+    sub = pool.states_at(pick)
+    for key in st:
+        np.testing.assert_array_equal(sub[key], st[key][pick], err_msg=key)
+
+
+def test_population_arguments_are_checked():
+    pool = make_pool("taichi")
+    n = int(pool.counts.sum())
+    with pytest.raises(ParameterError, match="one population index per live particle"):
+        pool.eliminate(np.zeros(n - 1), [n], [0], [0.5])
+    with pytest.raises(ParameterError, match="population indices"):
+        pool.eliminate(np.full(n, 3), [n], [0], [0.5])
+    with pytest.raises(ParameterError, match="index image"):
+        pool.hand_over(np.zeros(n), [n], np.ones(n, bool), np.zeros(1, bool), np.zeros((2, 2), np.int32))
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_index_image_prefers_the_larger_population_then_the_later_particle(engine):
+    """Pixel (3, 4): PPs Seq 1 and Seq 2 (two particles each) tie, the later particle wins;
+    pixel (6, 2): Seq 3 (three particles) beats the later Seq 4 particle (a PP of one)."""
+    pool = ParticlePool([10], SHAPE, engine=engine)
+    x = np.array([4, 4, 4, 4, 2, 9, 9, 2], np.float32)
+    y = np.array([3, 3, 3, 3, 6, 1, 1, 6], np.float32)
+    seq = np.array([1, 2, 1, 2, 3, 3, 3, 4], np.int32)
+    pool.set_state({0: dict(x=x + 0.3, y=y - 0.4, vx=0, vy=0, inten=1, e=1, tp=1, seq=seq)})
+    _, inverse, counts = populations(np.zeros(8, np.int64), seq)
+    keep, _ = pool.eliminate(inverse, counts, np.zeros(len(counts)), np.zeros(len(counts)))
+    index = np.zeros(SHAPE, np.int32)
+    pool.hand_over(inverse, counts, keep, np.zeros(len(counts), bool), index)
+    assert index[3, 4] == 2 and index[6, 2] == 3 and index[1, 9] == 3
+    assert np.count_nonzero(index) == 3
