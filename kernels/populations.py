@@ -38,31 +38,33 @@ class PopulationKernels:
     @ti.kernel
     def eliminate(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
                   size: ti.types.ndarray(dtype=ti.i32, ndim=1), take: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  phase: ti.types.ndarray(dtype=ti.f64, ndim=1), seen: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  phase: ti.types.ndarray(dtype=ti.f64, ndim=1), acc: ti.types.ndarray(dtype=ti.i32, ndim=1),
                   keep: ti.types.ndarray(dtype=ti.i8, ndim=1), sums: ti.types.ndarray(dtype=ti.f64, ndim=2)):
         """Eq. 37 and Eq. 38's sums.  Particle s (state order) of PP k = pp[s] is the r-th of its PP in
-        slot order (``seen`` counts them; pass zeros); it goes iff ⌊((r+1)·take + q)/size⌋ >
-        ⌊(r·take + q)/size⌋ with q = min(⌊phase·size⌋, size − 1), so exactly take_k of size_k go,
-        spread evenly over the PP's resampled order.  keep[s] ← 1 for survivors; sums[k] ← (survivors,
-        survivors with E = 1, Σ Tp over survivors, Σ x and Σ y over survivors with E = 1), added in
-        state order (f64).  A PP lies in one group, so groups run in parallel."""
+        slot order; it goes iff ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋ with
+        q = min(⌊phase·size⌋, size − 1), so exactly take_k of size_k go, spread evenly over the PP's
+        resampled order.  That is a running remainder acc = (r·take + q) mod size per PP (``acc``,
+        scratch): add take, the particle goes when it reaches size.  keep[s] ← 1 for survivors;
+        sums[k] ← (survivors, survivors with E = 1, Σ Tp over survivors, Σ x and Σ y over survivors
+        with E = 1), added in state order (f64).  A PP lies in one group, so groups run in parallel."""
         self.state_starts()
         ti.loop_config(serialize=True)
-        for k, c in ti.ndrange(sums.shape[0], sums.shape[1]):
-            sums[k, c] = 0.0
+        for k in range(size.shape[0]):
+            n_k = size[k]
+            acc[k] = ti.min(ti.cast(phase[k] * ti.cast(n_k, ti.f64), ti.i32), n_k - 1)
+            for c in ti.static(range(N_PP_SUMS)):
+                sums[k, c] = 0.0
         ti.loop_config(serialize=self.serial)
         for g in range(self.n.shape[0]):
             s0, off = self.state_start[g], self.off[g]
             for i in range(off, off + self.n[g]):
                 s = s0 + i - off
                 k = pp[s]
-                r = ti.cast(seen[k], ti.i64)
-                seen[k] += 1
-                n_k, t_k = ti.cast(size[k], ti.i64), ti.cast(take[k], ti.i64)
-                q = ti.min(ti.cast(phase[k] * ti.cast(n_k, ti.f64), ti.i64), n_k - 1)
-                kept = ((r + 1) * t_k + q) // n_k <= (r * t_k + q) // n_k
-                keep[s] = ti.cast(kept, ti.i8)
-                if kept:
+                a = acc[k] + take[k]
+                gone = a >= size[k]
+                acc[k] = a - ti.select(gone, size[k], 0)
+                keep[s] = ti.cast(not gone, ti.i8)
+                if not gone:
                     sums[k, P_KEPT] += 1.0
                     sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
                     if self.e[b, i] == 1:
@@ -100,16 +102,22 @@ class PopulationKernels:
                     keep[s] = ti.i8(0)
                 p = self.index_pixel(b, i)
                 if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                    ti.atomic_max(self.pixel_key[p // w, p % w], (ti.cast(size[pp[s]], ti.i64) << 32) + s)
-        ti.loop_config(serialize=self.serial)
-        for g in range(self.n.shape[0]):
-            s0, off = self.state_start[g], self.off[g]
-            for i in range(off, off + self.n[g]):
-                s = s0 + i - off
-                p = self.index_pixel(b, i)
-                if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                    if self.pixel_key[p // w, p % w] == (ti.cast(size[pp[s]], ti.i64) << 32) + s:
-                        index[p // w, p % w] = self.seq[b, i]
+                    key = (ti.cast(size[pp[s]], ti.i64) << 32) + s
+                    if ti.static(self.serial):  # one task, s increasing: the last larger key wins
+                        if key > self.pixel_key[p // w, p % w]:
+                            self.pixel_key[p // w, p % w] = key
+                            index[p // w, p % w] = self.seq[b, i]
+                    else:
+                        ti.atomic_max(self.pixel_key[p // w, p % w], key)
+        if ti.static(not self.serial):  # the winners write their Seq
+            for g in range(self.n.shape[0]):
+                s0, off = self.state_start[g], self.off[g]
+                for i in range(off, off + self.n[g]):
+                    s = s0 + i - off
+                    p = self.index_pixel(b, i)
+                    if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
+                        if self.pixel_key[p // w, p % w] == (ti.cast(size[pp[s]], ti.i64) << 32) + s:
+                            index[p // w, p % w] = self.seq[b, i]
         self.compact(b, keep)
 
     @ti.kernel

@@ -300,7 +300,7 @@ class ParticlePool:
         keep = np.zeros(len(pp), np.int8)
         sums = np.zeros((len(size), N_PP_SUMS))
         if len(pp):
-            self.k.eliminate(self.buf, pp, size, take, phase, np.zeros(len(size), np.int32), keep, sums)
+            self.k.eliminate(self.buf, pp, size, take, phase, np.empty(len(size), np.int32), keep, sums)
         return keep.astype(bool), sums
 
     def hand_over(self, pp, size, keep, drop, index: np.ndarray) -> None:
@@ -333,6 +333,9 @@ class ParticlePool:
             raise ParameterError(f"population indices must lie in [0, {len(size)})")
         take = None if take is None else np.ascontiguousarray(take, dtype=np.int32).reshape(-1)
         phase = None if phase is None else np.ascontiguousarray(phase, dtype=np.float64).reshape(-1)
+        if take is not None and (take.shape != size.shape or phase.shape != size.shape
+                                 or (take < 0).any() or (take > size).any() or not ((phase >= 0) & (phase < 1)).all()):
+            raise ParameterError("need one take in [0, size] and one phase in [0, 1) per population")
         return pp, size, take, phase
 
     # ------------------------------------------------------------ one step

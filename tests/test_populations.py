@@ -13,6 +13,17 @@ SHAPE = (19, 27)
 CAPS = [900, 40, 1300, 5]
 
 
+def pool_engine(engine, monkeypatch):
+    """The pool engine for a test parameter; "taichi-parallel" runs the parallel loops (large pools,
+    GPUs) on the CPU instead of one serial task."""
+    if engine == "taichi-parallel":
+        import tbd_taichi.particles as particles
+
+        monkeypatch.setattr(particles, "SERIAL_PARTICLES", 0)
+        return "taichi"
+    return engine
+
+
 def make_pool(engine, rng_seed=0):
     """Groups of several sizes (one empty), Seq labels 0…7 with a large one, positions also outside the image."""
     rng = np.random.default_rng(rng_seed)
@@ -58,8 +69,9 @@ def host_reference(st, inverse, counts, take, phase, drop, shape):
     return keep, sums, final, index
 
 
-@pytest.mark.parametrize("engine", ["taichi", "numpy"])
-def test_eliminate_and_hand_over_match_the_host_reference(engine):
+@pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])
+def test_eliminate_and_hand_over_match_the_host_reference(engine, monkeypatch):
+    engine = pool_engine(engine, monkeypatch)
     pool = make_pool(engine)
     st = pool.state()
     np.testing.assert_array_equal(pool.seq_in_state_order(), st["seq"])
@@ -100,14 +112,19 @@ def test_population_arguments_are_checked():
         pool.eliminate(np.zeros(n - 1), [n], [0], [0.5])
     with pytest.raises(ParameterError, match="population indices"):
         pool.eliminate(np.full(n, 3), [n], [0], [0.5])
+    with pytest.raises(ParameterError, match="take in"):
+        pool.eliminate(np.zeros(n), [n], [n + 1], [0.5])
+    with pytest.raises(ParameterError, match="take in"):
+        pool.eliminate(np.zeros(n), [n], [1], [1.0])
     with pytest.raises(ParameterError, match="index image"):
         pool.hand_over(np.zeros(n), [n], np.ones(n, bool), np.zeros(1, bool), np.zeros((2, 2), np.int32))
 
 
-@pytest.mark.parametrize("engine", ["taichi", "numpy"])
-def test_index_image_prefers_the_larger_population_then_the_later_particle(engine):
+@pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])
+def test_index_image_prefers_the_larger_population_then_the_later_particle(engine, monkeypatch):
     """Pixel (3, 4): PPs Seq 1 and Seq 2 (two particles each) tie, the later particle wins;
     pixel (6, 2): Seq 3 (three particles) beats the later Seq 4 particle (a PP of one)."""
+    engine = pool_engine(engine, monkeypatch)
     pool = ParticlePool([10], SHAPE, engine=engine)
     x = np.array([4, 4, 4, 4, 2, 9, 9, 2], np.float32)
     y = np.array([3, 3, 3, 3, 6, 1, 1, 6], np.float32)

@@ -43,11 +43,10 @@ class NumpyPopulationKernels:
         """Slots of the live particles in state order (group, then slot)."""
         return np.concatenate([np.arange(o, o + n) for o, n in zip(self.off, self.n)]).astype(np.int64)
 
-    def eliminate(self, b, pp, size, take, phase, seen, keep, sums) -> None:
+    def eliminate(self, b, pp, size, take, phase, acc, keep, sums) -> None:
         slots = self.state_slots()
         n_pp = len(size)
         keep[:] = ~spread_removal(rank_in_population(pp.astype(np.int64), size), size[pp], take[pp], phase[pp])
-        seen[:] += np.bincount(pp, minlength=n_pp).astype(seen.dtype)
         kept = keep.astype(bool)
         with_e = kept & (self.e[b, slots] == 1)
         sums[:, P_KEPT] = np.bincount(pp, weights=kept, minlength=n_pp)
