@@ -84,7 +84,7 @@ class ParticleKernels(PopulationKernels):
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.label = i32(*frame_shape)
-        self.pixel_key = ti.field(ti.i64, shape=frame_shape)  # populations: the index image's winner
+        self.population_fields(c, frame_shape)
         self.normal = NormalTables()
 
     # ------------------------------------------------------------ helpers
@@ -556,23 +556,17 @@ class ParticleKernels(PopulationKernels):
 
     @ti.kernel
     def write_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                    x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                    inten: ti.types.ndarray(dtype=ti.f32, ndim=1), e: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                    tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    floats: ti.types.ndarray(dtype=ti.f32, ndim=2), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
                     counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """Host particle states into ``slots`` of buffer b, and the live counts, in one launch for every group."""
+        """Host particle states into ``slots`` of buffer b (rows x, vx, y, vy, I of ``floats`` and E, Tp,
+        Seq of ``ints``), and the live counts, in one launch for every group.  (A launch costs about
+        20 µs per array argument here, so the states travel as two arrays, not eight.)"""
         ti.loop_config(serialize=self.serial)
         for k in range(slots.shape[0]):
             i = slots[k]
-            self.x[b, i] = x[k]
-            self.vx[b, i] = vx[k]
-            self.y[b, i] = y[k]
-            self.vy[b, i] = vy[k]
-            self.inten[b, i] = inten[k]
-            self.e[b, i] = e[k]
-            self.tp[b, i] = tp[k]
-            self.seq[b, i] = seq[k]
+            self.x[b, i], self.vx[b, i], self.y[b, i] = floats[0, k], floats[1, k], floats[2, k]
+            self.vy[b, i], self.inten[b, i] = floats[3, k], floats[4, k]
+            self.e[b, i], self.tp[b, i], self.seq[b, i] = ints[0, k], ints[1, k], ints[2, k]
         self.store_counts(counts)
 
     @ti.kernel
@@ -600,24 +594,15 @@ class ParticleKernels(PopulationKernels):
 
     @ti.kernel
     def read_slots(self, b: ti.i32, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                   x: ti.types.ndarray(dtype=ti.f32, ndim=1), vx: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                   y: ti.types.ndarray(dtype=ti.f32, ndim=1), vy: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                   inten: ti.types.ndarray(dtype=ti.f32, ndim=1), e: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                   tp: ti.types.ndarray(dtype=ti.i32, ndim=1), seq: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                   logw: ti.types.ndarray(dtype=ti.f32, ndim=1)):
-        """The states of ``slots`` in buffer b (and their log-weights) to the host, in one launch."""
+                   floats: ti.types.ndarray(dtype=ti.f32, ndim=2), ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """The states of ``slots`` in buffer b to the host: rows x, vx, y, vy, I and log-weight of
+        ``floats``, E, Tp and Seq of ``ints``, in one launch."""
         ti.loop_config(serialize=self.serial)
         for k in range(slots.shape[0]):
             i = slots[k]
-            x[k] = self.x[b, i]
-            vx[k] = self.vx[b, i]
-            y[k] = self.y[b, i]
-            vy[k] = self.vy[b, i]
-            inten[k] = self.inten[b, i]
-            e[k] = self.e[b, i]
-            tp[k] = self.tp[b, i]
-            seq[k] = self.seq[b, i]
-            logw[k] = self.logw[i]
+            floats[0, k], floats[1, k], floats[2, k] = self.x[b, i], self.vx[b, i], self.y[b, i]
+            floats[3, k], floats[4, k], floats[5, k] = self.vy[b, i], self.inten[b, i], self.logw[i]
+            ints[0, k], ints[1, k], ints[2, k] = self.e[b, i], self.tp[b, i], self.seq[b, i]
 
     @ti.kernel
     def load_labels(self, labels: ti.types.ndarray(dtype=ti.i32, ndim=2)):

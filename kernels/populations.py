@@ -23,7 +23,15 @@ N_PP_SUMS = 5
 
 @ti.data_oriented
 class PopulationKernels:
-    """Eqs. 37–38 over the pool; needs the ``ParticleKernels`` fields and a per-pixel ``pixel_key`` (i64)."""
+    """Eqs. 37–38 over the pool; needs the ``ParticleKernels`` fields and :meth:`population_fields`."""
+
+    def population_fields(self, capacity: int, frame_shape):
+        """Scratch kept between eliminate and hand_over: per state index the PP and keep flag, per PP
+        its size, quota and running remainder, per pixel the index image's precedence."""
+        self.state_pp, self.state_keep = ti.field(ti.i32, capacity), ti.field(ti.i8, capacity)
+        self.pp_size, self.pp_take, self.pp_acc = ti.field(ti.i32, capacity), ti.field(ti.i32, capacity), \
+            ti.field(ti.i32, capacity)
+        self.pixel_key = ti.field(ti.i64, shape=frame_shape)
 
     @ti.func
     def state_starts(self):
@@ -37,21 +45,24 @@ class PopulationKernels:
 
     @ti.kernel
     def eliminate(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  size: ti.types.ndarray(dtype=ti.i32, ndim=1), take: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  phase: ti.types.ndarray(dtype=ti.f64, ndim=1), acc: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  keep: ti.types.ndarray(dtype=ti.i8, ndim=1), sums: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        """Eq. 37 and Eq. 38's sums.  Particle s (state order) of PP k = pp[s] is the r-th of its PP in
-        slot order; it goes iff ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋ with
-        q = min(⌊phase·size⌋, size − 1), so exactly take_k of size_k go, spread evenly over the PP's
-        resampled order.  That is a running remainder acc = (r·take + q) mod size per PP (``acc``,
-        scratch): add take, the particle goes when it reaches size.  keep[s] ← 1 for survivors;
-        sums[k] ← (survivors, survivors with E = 1, Σ Tp over survivors, Σ x and Σ y over survivors
-        with E = 1), added in state order (f64).  A PP lies in one group, so groups run in parallel."""
+                  table: ti.types.ndarray(dtype=ti.f64, ndim=2), keep: ti.types.ndarray(dtype=ti.i8, ndim=1),
+                  sums: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """Eq. 37 and Eq. 38's sums.  Particle s (state order) belongs to PP k = pp[s]; ``table`` rows
+        hold each PP's size, take and phase.  The r-th particle of a PP in slot order goes iff
+        ⌊((r+1)·take + q)/size⌋ > ⌊(r·take + q)/size⌋ with q = min(⌊phase·size⌋, size − 1), so
+        exactly take of size go, spread evenly over the PP's resampled order.  That is a running
+        remainder acc = (r·take + q) mod size per PP: add take, the particle goes when it reaches
+        size.  keep[s] ← 1 for survivors; sums[k] ← (survivors, survivors with E = 1, Σ Tp over
+        survivors, Σ x and Σ y over survivors with E = 1), added in state order (f64).  pp, sizes
+        and keep stay on the device for :meth:`hand_over`.  A PP lies in one group, so groups run
+        in parallel."""
         self.state_starts()
         ti.loop_config(serialize=True)
-        for k in range(size.shape[0]):
-            n_k = size[k]
-            acc[k] = ti.min(ti.cast(phase[k] * ti.cast(n_k, ti.f64), ti.i32), n_k - 1)
+        for k in range(table.shape[1]):
+            n_k = ti.cast(table[0, k], ti.i32)
+            self.pp_size[k] = n_k
+            self.pp_take[k] = ti.cast(table[1, k], ti.i32)
+            self.pp_acc[k] = ti.min(ti.cast(table[2, k] * table[0, k], ti.i32), n_k - 1)
             for c in ti.static(range(N_PP_SUMS)):
                 sums[k, c] = 0.0
         ti.loop_config(serialize=self.serial)
@@ -60,10 +71,12 @@ class PopulationKernels:
             for i in range(off, off + self.n[g]):
                 s = s0 + i - off
                 k = pp[s]
-                a = acc[k] + take[k]
-                gone = a >= size[k]
-                acc[k] = a - ti.select(gone, size[k], 0)
+                self.state_pp[s] = k
+                a = self.pp_acc[k] + self.pp_take[k]
+                gone = a >= self.pp_size[k]
+                self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
                 keep[s] = ti.cast(not gone, ti.i8)
+                self.state_keep[s] = keep[s]
                 if not gone:
                     sums[k, P_KEPT] += 1.0
                     sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
@@ -80,14 +93,18 @@ class PopulationKernels:
         y = ti.cast(ti.floor(self.y[b, i] + 0.5), ti.i32)
         return ti.select(0 <= x < w and 0 <= y < h, y * w + x, -1)
 
+    @ti.func
+    def index_key(self, s: ti.i32) -> ti.i64:
+        """The index image's precedence of state-order particle s: its PP's size, then s."""
+        return (ti.cast(self.pp_size[self.state_pp[s]], ti.i64) << 32) + s
+
     @ti.kernel
-    def hand_over(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  size: ti.types.ndarray(dtype=ti.i32, ndim=1), drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
-                  keep: ti.types.ndarray(dtype=ti.i8, ndim=1), index: ti.types.ndarray(dtype=ti.i32, ndim=2)):
-        """keep[s] ← 0 for the particles of dropped PPs (drop[pp[s]]); the index image P_pp (Eq. 36):
-        each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the larger PP (size)
-        winning, then the later in state order; the kept particles move to the front of their slabs."""
-        self.state_starts()
+    def hand_over(self, b: ti.i32, drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
+                  index: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """After :meth:`eliminate`: the particles of dropped PPs (drop[k] ≠ 0) go too; the index image
+        P_pp (Eq. 36): each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the
+        larger PP winning, then the later in state order; the kept particles move to the front of
+        their slabs."""
         h, w = ti.static(self.label.shape[0], self.label.shape[1])
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
@@ -98,11 +115,11 @@ class PopulationKernels:
             s0, off = self.state_start[g], self.off[g]
             for i in range(off, off + self.n[g]):
                 s = s0 + i - off
-                if drop[pp[s]] != 0:
-                    keep[s] = ti.i8(0)
+                if drop[self.state_pp[s]] != 0:
+                    self.state_keep[s] = ti.i8(0)
                 p = self.index_pixel(b, i)
-                if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                    key = (ti.cast(size[pp[s]], ti.i64) << 32) + s
+                if self.state_keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
+                    key = self.index_key(s)
                     if ti.static(self.serial):  # one task, s increasing: the last larger key wins
                         if key > self.pixel_key[p // w, p % w]:
                             self.pixel_key[p // w, p % w] = key
@@ -115,10 +132,10 @@ class PopulationKernels:
                 for i in range(off, off + self.n[g]):
                     s = s0 + i - off
                     p = self.index_pixel(b, i)
-                    if keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                        if self.pixel_key[p // w, p % w] == (ti.cast(size[pp[s]], ti.i64) << 32) + s:
+                    if self.state_keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
+                        if self.pixel_key[p // w, p % w] == self.index_key(s):
                             index[p // w, p % w] = self.seq[b, i]
-        self.compact(b, keep)
+        self.compact(b, self.state_keep)
 
     @ti.kernel
     def read_seq(self, b: ti.i32, seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):

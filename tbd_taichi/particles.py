@@ -35,9 +35,8 @@ from .errors import ParameterError
 ENGINES = ("taichi", "numpy")
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
-STATE_DTYPES = tuple((name, np.float32) for name in ("x", "vx", "y", "vy", "inten")) + \
-    tuple((name, np.int32) for name in ("e", "tp", "seq")) + (("logw", np.float32),)
-STATE = tuple(name for name, _ in STATE_DTYPES[:-1])  # a particle's state (all but logw)
+FLOAT_STATE, INT_STATE = ("x", "vx", "y", "vy", "inten"), ("e", "tp", "seq")
+STATE = FLOAT_STATE + INT_STATE  # a particle's state
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 
 
@@ -116,6 +115,7 @@ class ParticlePool:
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
         self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
+        self._eliminated = None  # (pp, populations, keep) of the last eliminate, until its hand_over
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
@@ -216,10 +216,15 @@ class ParticlePool:
     def state(self) -> dict:
         """Live particles of the current buffer: arrays x, vx, y, vy, inten, e, tp, seq, group, slot, logw."""
         group = np.repeat(np.arange(self.n_groups), self.counts)
-        slots = self._slots_in_order(group, self.counts)
-        out = {name: np.empty(len(slots), dtype) for name, dtype in STATE_DTYPES}
+        return self._read_states(self._slots_in_order(group, self.counts), group)
+
+    def _read_states(self, slots: np.ndarray, group: np.ndarray) -> dict:
+        """The states of ``slots`` (one launch), with their ``group``."""
+        floats, ints = np.empty((len(FLOAT_STATE) + 1, len(slots)), np.float32), np.empty((len(INT_STATE), len(slots)), np.int32)
         if len(slots):
-            self.k.read_slots(self.buf, slots, *out.values())
+            self.k.read_slots(self.buf, slots, floats, ints)
+        out = dict(zip(FLOAT_STATE + ("logw",), floats))
+        out.update(zip(INT_STATE, ints))
         out.update(group=group, slot=slots.astype(np.int64))
         return out
 
@@ -253,9 +258,12 @@ class ParticlePool:
             self.set_counts(counts)
             return
         slots = self._slots_in_order(group, per_group)
-        arrays = [np.ascontiguousarray(np.broadcast_to(cols.get(name, 0), len(group)), dtype=dtype)
-                  for name, dtype in STATE_DTYPES[:-1]]  # all but logw
-        self.k.write_slots(self.buf, slots, *arrays, counts)
+        floats = np.empty((len(FLOAT_STATE), len(group)), np.float32)
+        ints = np.empty((len(INT_STATE), len(group)), np.int32)
+        for rows, names in ((floats, FLOAT_STATE), (ints, INT_STATE)):
+            for row, name in zip(rows, names):
+                row[:] = cols.get(name, 0)
+        self.k.write_slots(self.buf, slots, floats, ints, counts)
         self.counts = counts
 
     def keep(self, keep) -> None:
@@ -282,61 +290,54 @@ class ParticlePool:
         index = np.asarray(index, dtype=np.int64).reshape(-1)
         group = np.repeat(np.arange(self.n_groups), self.counts)[index]
         slots = (self.off[group] + index - (np.cumsum(self.counts) - self.counts)[group]).astype(np.int32)
-        out = {name: np.empty(len(slots), dtype) for name, dtype in STATE_DTYPES}
-        if len(slots):
-            self.k.read_slots(self.buf, slots, *out.values())
-        out.update(group=group, slot=slots.astype(np.int64))
-        return out
+        return self._read_states(slots, group)
 
     def eliminate(self, pp, size, take, phase) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 37 on the device: particle s (state order) belongs to population pp[s] of ``size[k]``
         particles, ``take[k]`` of which go, spread over the population by ``phase[k]`` ∈ [0, 1).
         Returns the survivors' flags (state order) and per population the sums over survivors
         (columns ``kernels.populations.P_*``: count, count with E = 1, Σ Tp, Σ x and Σ y with E = 1).
-        The pool is unchanged until :meth:`hand_over`."""
+        The pool is unchanged until :meth:`hand_over`, which must come next."""
         from .kernels.populations import N_PP_SUMS
 
-        pp, size, take, phase = self._population_arrays(pp, size, take, phase)
-        keep = np.zeros(len(pp), np.int8)
-        sums = np.zeros((len(size), N_PP_SUMS))
-        if len(pp):
-            self.k.eliminate(self.buf, pp, size, take, phase, np.empty(len(size), np.int32), keep, sums)
+        pp = np.ascontiguousarray(pp, dtype=np.int32).reshape(-1)
+        table = np.array([size, take, phase], dtype=np.float64).reshape(3, -1)
+        n = int(self.counts.sum())
+        if pp.shape != (n,):
+            raise ParameterError(f"need one population index per live particle ({n}), got {pp.shape}")
+        if n and (pp.min() < 0 or pp.max() >= table.shape[1]):
+            raise ParameterError(f"population indices must lie in [0, {table.shape[1]})")
+        size, take, phase = table
+        if (size < 1).any() or (take < 0).any() or (take > size).any() or ((phase < 0) | (phase >= 1)).any():
+            raise ParameterError("need per population a size ≥ 1, a take in [0, size] and a phase in [0, 1)")
+        keep = np.zeros(n, np.int8)
+        sums = np.zeros((table.shape[1], N_PP_SUMS))
+        if n:
+            self.k.eliminate(self.buf, pp, table, keep, sums)
+        self._eliminated = (pp, table.shape[1], keep)
         return keep.astype(bool), sums
 
-    def hand_over(self, pp, size, keep, drop, index: np.ndarray) -> None:
-        """Remove the particles not in ``keep`` and those of the populations flagged in ``drop``;
-        write the index image P_pp (Eq. 36) into ``index`` (H, W, int32): each pixel gets the Seq
-        of the kept particles in it, those of the larger population (``size``) winning, then the
-        later in state order (0: none)."""
-        pp, size, _, _ = self._population_arrays(pp, size)
-        keep = np.ascontiguousarray(keep, dtype=np.int8)
-        drop = np.ascontiguousarray(drop, dtype=np.int8)
+    def hand_over(self, drop, index: np.ndarray) -> None:
+        """After :meth:`eliminate`: remove its eliminated particles and those of the populations
+        flagged in ``drop``; write the index image P_pp (Eq. 36) into ``index`` (H, W, int32): each
+        pixel gets the Seq of the kept particles in it, those of the larger population winning, then
+        the later in state order (0: none)."""
+        if self._eliminated is None:
+            raise ParameterError("hand_over needs an eliminate first")
+        pp, n_pp, keep = self._eliminated
+        drop = np.ascontiguousarray(drop, dtype=np.int8).reshape(-1)
+        if drop.shape != (n_pp,):
+            raise ParameterError(f"need one drop flag per population ({n_pp}), got {drop.shape}")
         if index.shape != self.frame_shape or index.dtype != np.int32 or not index.flags.c_contiguous:
             raise ParameterError(f"index image must be a C-contiguous int32 array of shape {self.frame_shape}")
-        if keep.shape != pp.shape or drop.shape != size.shape:
-            raise ParameterError("need one keep flag per particle and one drop flag per population")
+        self._eliminated = None
         if not len(pp):
             index[...] = 0
             return
-        self.k.hand_over(self.buf, pp, size, drop, keep, index)
+        self.k.hand_over(self.buf, drop, index)
         kept = (keep != 0) & (drop[pp] == 0)
         self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[kept],
                                   minlength=self.n_groups).astype(np.int32)
-
-    def _population_arrays(self, pp, size, take=None, phase=None):
-        """Checked, contiguous population arrays: pp (one per live particle, < len(size)), size, take, phase."""
-        pp = np.ascontiguousarray(pp, dtype=np.int32).reshape(-1)
-        size = np.ascontiguousarray(size, dtype=np.int32).reshape(-1)
-        if pp.shape != (int(self.counts.sum()),):
-            raise ParameterError(f"need one population index per live particle ({int(self.counts.sum())}), got {pp.shape}")
-        if len(pp) and (pp.min() < 0 or pp.max() >= len(size)):
-            raise ParameterError(f"population indices must lie in [0, {len(size)})")
-        take = None if take is None else np.ascontiguousarray(take, dtype=np.int32).reshape(-1)
-        phase = None if phase is None else np.ascontiguousarray(phase, dtype=np.float64).reshape(-1)
-        if take is not None and (take.shape != size.shape or phase.shape != size.shape
-                                 or (take < 0).any() or (take > size).any() or not ((phase >= 0) & (phase < 1)).all()):
-            raise ParameterError("need one take in [0, size] and one phase in [0, 1) per population")
-        return pp, size, take, phase
 
     # ------------------------------------------------------------ one step
 

@@ -326,7 +326,7 @@ class SGDSPF:
                 drop[k] = True
                 handed.append(np.flatnonzero((inverse == k) & keep))
         members = pool.states_at(np.concatenate(handed)) if handed else None
-        pool.hand_over(inverse, counts, keep, drop, self.pp_index)
+        pool.hand_over(drop, self.pp_index)
         self._start_tracks(f, members, [len(m) for m in handed], rng)
 
     def _near_track(self, x: float, y: float) -> bool:

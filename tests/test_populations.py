@@ -88,7 +88,7 @@ def test_eliminate_and_hand_over_match_the_host_reference(engine, monkeypatch):
     np.testing.assert_array_equal(sums, sums_ref)  # same order of f64 additions: same bits
     np.testing.assert_array_equal(np.bincount(inverse, weights=~keep, minlength=len(counts)), take)  # Eq. 37 quotas
     index = np.full(SHAPE, -5, np.int32)
-    pool.hand_over(inverse, counts, keep, drop, index)
+    pool.hand_over(drop, index)
     np.testing.assert_array_equal(index, index_ref)
     after = pool.state()
     for key in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "group"):
@@ -116,8 +116,13 @@ def test_population_arguments_are_checked():
         pool.eliminate(np.zeros(n), [n], [n + 1], [0.5])
     with pytest.raises(ParameterError, match="take in"):
         pool.eliminate(np.zeros(n), [n], [1], [1.0])
+    with pytest.raises(ParameterError, match="needs an eliminate first"):
+        pool.hand_over(np.zeros(1, bool), np.zeros(SHAPE, np.int32))
+    pool.eliminate(np.zeros(n), [n], [1], [0.5])
+    with pytest.raises(ParameterError, match="one drop flag per population"):
+        pool.hand_over(np.zeros(2, bool), np.zeros(SHAPE, np.int32))
     with pytest.raises(ParameterError, match="index image"):
-        pool.hand_over(np.zeros(n), [n], np.ones(n, bool), np.zeros(1, bool), np.zeros((2, 2), np.int32))
+        pool.hand_over(np.zeros(1, bool), np.zeros((2, 2), np.int32))
 
 
 @pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])
@@ -133,6 +138,6 @@ def test_index_image_prefers_the_larger_population_then_the_later_particle(engin
     _, inverse, counts = populations(np.zeros(8, np.int64), seq)
     keep, _ = pool.eliminate(inverse, counts, np.zeros(len(counts)), np.zeros(len(counts)))
     index = np.zeros(SHAPE, np.int32)
-    pool.hand_over(inverse, counts, keep, np.zeros(len(counts), bool), index)
+    pool.hand_over(np.zeros(len(counts), bool), index)
     assert index[3, 4] == 2 and index[6, 2] == 3 and index[1, 9] == 3
     assert np.count_nonzero(index) == 3

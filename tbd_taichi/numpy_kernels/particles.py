@@ -309,8 +309,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
     def load_frame(self, z: np.ndarray) -> None:
         self.z[...] = z
 
-    def write_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, counts) -> None:
-        for name, value in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
+    def write_slots(self, b, slots, floats, ints, counts) -> None:
+        for name, value in zip(STATE, list(floats) + list(ints)):
             getattr(self, name)[b, slots] = value
         self.store_counts(counts)
 
@@ -325,10 +325,10 @@ class NumpyParticleKernels(NumpyPopulationKernels):
             self.n[g] = len(kept)
             start += n
 
-    def read_slots(self, b, slots, x, vx, y, vy, inten, e, tp, seq, logw) -> None:
-        for name, out in zip(STATE, (x, vx, y, vy, inten, e, tp, seq)):
+    def read_slots(self, b, slots, floats, ints) -> None:
+        for name, out in zip(STATE, list(floats[:5]) + list(ints)):
             out[:] = getattr(self, name)[b, slots]
-        logw[:] = self.logw[slots]
+        floats[5] = self.logw[slots]
 
     def load_labels(self, labels: np.ndarray) -> None:
         self.label[...] = labels

@@ -43,8 +43,9 @@ class NumpyPopulationKernels:
         """Slots of the live particles in state order (group, then slot)."""
         return np.concatenate([np.arange(o, o + n) for o, n in zip(self.off, self.n)]).astype(np.int64)
 
-    def eliminate(self, b, pp, size, take, phase, acc, keep, sums) -> None:
+    def eliminate(self, b, pp, table, keep, sums) -> None:
         slots = self.state_slots()
+        size, take, phase = table[0].astype(np.int64), table[1].astype(np.int64), table[2]
         n_pp = len(size)
         keep[:] = ~spread_removal(rank_in_population(pp.astype(np.int64), size), size[pp], take[pp], phase[pp])
         kept = keep.astype(bool)
@@ -54,15 +55,17 @@ class NumpyPopulationKernels:
         sums[:, P_TP] = np.bincount(pp, weights=np.where(kept, self.tp[b, slots], 0), minlength=n_pp)
         sums[:, P_X] = np.bincount(pp, weights=np.where(with_e, self.x[b, slots], 0), minlength=n_pp)
         sums[:, P_Y] = np.bincount(pp, weights=np.where(with_e, self.y[b, slots], 0), minlength=n_pp)
+        self._eliminated = (pp.copy(), size, kept)
 
-    def hand_over(self, b, pp, size, drop, keep, index) -> None:
+    def hand_over(self, b, drop, index) -> None:
+        pp, size, kept = self._eliminated
         slots = self.state_slots()
-        keep[drop[pp] != 0] = 0
+        keep = kept & (drop[pp] == 0)
         h, w = index.shape
         x = np.floor(self.x[b, slots] + np.float32(0.5)).astype(np.int64)
         y = np.floor(self.y[b, slots] + np.float32(0.5)).astype(np.int64)
         seq = self.seq[b, slots]
-        inside = (keep != 0) & (x >= 0) & (x < w) & (y >= 0) & (y < h) & (seq > 0)
+        inside = keep & (x >= 0) & (x < w) & (y >= 0) & (y < h) & (seq > 0)
         order = stable_order(size[pp][inside])  # larger PPs written last win, then later particles
         index[:] = 0
         index[y[inside][order], x[inside][order]] = seq[inside][order]
