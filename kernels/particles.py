@@ -381,13 +381,19 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def tile_cumulative(self):
-        """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64."""
+        """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64.  E = 0
+        particles have log-weight 0, so their weight exp(−gmax) is computed once per tile."""
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
             gmax = ti.cast(self.gmax[self.tile_group[t]], ti.f64)
+            w0 = ti.exp(-gmax)
             s = ti.cast(0.0, ti.f64)
             for i in range(self.tile_start[t], self.tile_end(t)):
-                s += ti.exp(ti.cast(self.logw[i], ti.f64) - gmax)
+                lw = self.logw[i]
+                w = w0
+                if lw != 0.0:
+                    w = ti.exp(ti.cast(lw, ti.f64) - gmax)
+                s += w
                 self.cum[i] = s
             self.tile_total[t] = s
 
