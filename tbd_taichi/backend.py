@@ -23,6 +23,9 @@ import taichi as ti  # noqa: E402
 from .errors import BackendError  # noqa: E402
 
 ARCH_NAMES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
+# compiled kernels kept on disk; Taichi's default 100 MiB evicts kernels that a test run, or a
+# program that tracks several frame sizes (each compiles its own), needs again
+OFFLINE_CACHE_BYTES = 512 << 20
 GPU_ARCHS = ("cuda", "vulkan", "metal")
 
 
@@ -97,6 +100,7 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
     if _current is not None:
         ti.reset()
     kwargs = dict(arch=_ti_arch(name), debug=bool(debug), offline_cache=True,
+                  offline_cache_max_size_of_files=OFFLINE_CACHE_BYTES,
                   log_level=ti.WARN, enable_fallback=False, default_fp=ti.f32, default_ip=ti.i32,
                   fast_math=False)  # IEEE f32: the NumPy twins reproduce the same bits
     if threads is not None:

@@ -409,11 +409,17 @@ class SGDSPF:
         return ok
 
     def _merge_duplicates(self) -> None:
-        """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends."""
-        for a in sorted(self.active, key=lambda t: t.track_id):
-            for b in [t for t in self.active if t.track_id > a.track_id]:
-                if a in self.active and math.dist(a.last_xy(), b.last_xy()) < DUPLICATE_RADIUS:
-                    self._end_track(b)
+        """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
+        and a track that has ended ends no other."""
+        tracks = sorted(self.active, key=lambda t: t.track_id)
+        xy = np.array([t.last_xy() for t in tracks]).reshape(-1, 2)
+        close = np.triu(np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) < DUPLICATE_RADIUS, 1)
+        alive = np.ones(len(tracks), bool)
+        for i in np.flatnonzero(close.any(axis=1)):
+            if alive[i]:
+                for j in np.flatnonzero(close[i] & alive):
+                    alive[j] = False
+                    self._end_track(tracks[j])
 
     def _end_track(self, t: Track) -> None:
         self.active.remove(t)
