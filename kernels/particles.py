@@ -90,11 +90,6 @@ class ParticleKernels(PopulationKernels):
     # ------------------------------------------------------------ helpers
 
     @ti.func
-    def live(self, i: ti.i32) -> ti.i32:
-        g = self.slot_group[i]
-        return g >= 0 and i - self.off[g] < self.n[g]
-
-    @ti.func
     def tile_end(self, t: ti.i32) -> ti.i32:
         g = self.tile_group[t]
         return ti.min(self.tile_start[t] + TILE, self.off[g] + self.n[g])
