@@ -43,6 +43,17 @@ class PopulationKernels:
                 self.state_start[h] = s
                 s += self.n[h]
 
+    @ti.func
+    def for_states(self, body: ti.template(), b: ti.i32, arrays: ti.template()):
+        """body(s, i, b, arrays) for every live particle, s its index in state order and i its slot
+        (after ``state_starts``); one task per group, slots in order.  ``arrays``: the kernel's array
+        arguments, as ``ti.static((…))``."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):
+            s0, off = self.state_start[g], self.off[g]
+            for i in range(off, off + self.n[g]):
+                body(s0 + i - off, i, b, arrays)
+
     @ti.kernel
     def eliminate(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
                   table: ti.types.ndarray(dtype=ti.f64, ndim=2), keep: ti.types.ndarray(dtype=ti.i8, ndim=1),
@@ -65,33 +76,36 @@ class PopulationKernels:
             self.pp_acc[k] = ti.min(ti.cast(table[2, k] * table[0, k], ti.i32), n_k - 1)
             for c in ti.static(range(N_PP_SUMS)):
                 sums[k, c] = 0.0
-        ti.loop_config(serialize=self.serial)
-        for g in range(self.n.shape[0]):
-            s0, off = self.state_start[g], self.off[g]
-            for i in range(off, off + self.n[g]):
-                s = s0 + i - off
-                k = pp[s]
-                self.state_pp[s] = k
-                a = self.pp_acc[k] + self.pp_take[k]
-                gone = a >= self.pp_size[k]
-                self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
-                keep[s] = ti.cast(not gone, ti.i8)
-                self.state_keep[s] = keep[s]
-                if not gone:
-                    sums[k, P_KEPT] += 1.0
-                    sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
-                    if self.e[b, i] == 1:
-                        sums[k, P_KEPT_E] += 1.0
-                        sums[k, P_X] += ti.cast(self.x[b, i], ti.f64)
-                        sums[k, P_Y] += ti.cast(self.y[b, i], ti.f64)
+        self.for_states(self.remove_spread, b, ti.static((pp, keep, sums)))
 
     @ti.func
-    def index_pixel(self, b: ti.i32, i: ti.i32) -> ti.i32:
-        """Flat pixel y·W + x of the particle in slot i (nearest pixel), or −1 outside the image."""
+    def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """``eliminate`` for particle s (slot i)."""
+        pp, keep, sums = ti.static(arrays)
+        k = pp[s]
+        self.state_pp[s] = k
+        a = self.pp_acc[k] + self.pp_take[k]
+        gone = a >= self.pp_size[k]
+        self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
+        keep[s] = ti.cast(not gone, ti.i8)
+        self.state_keep[s] = keep[s]
+        if not gone:
+            sums[k, P_KEPT] += 1.0
+            sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
+            if self.e[b, i] == 1:
+                sums[k, P_KEPT_E] += 1.0
+                sums[k, P_X] += ti.cast(self.x[b, i], ti.f64)
+                sums[k, P_Y] += ti.cast(self.y[b, i], ti.f64)
+
+    @ti.func
+    def index_pixel(self, b: ti.i32, s: ti.i32, i: ti.i32) -> ti.i32:
+        """Flat pixel y·W + x (nearest) of particle s in slot i if it is kept, has Seq > 0 and lies in
+        the image (it takes part in the index image), else −1."""
         h, w = ti.static(self.label.shape[0], self.label.shape[1])
         x = ti.cast(ti.floor(self.x[b, i] + 0.5), ti.i32)
         y = ti.cast(ti.floor(self.y[b, i] + 0.5), ti.i32)
-        return ti.select(0 <= x < w and 0 <= y < h, y * w + x, -1)
+        ok = self.state_keep[s] != 0 and self.seq[b, i] > 0 and 0 <= x < w and 0 <= y < h
+        return ti.select(ok, y * w + x, -1)
 
     @ti.func
     def index_key(self, s: ti.i32) -> ti.i64:
@@ -110,39 +124,46 @@ class PopulationKernels:
         for y, x in ti.ndrange(h, w):
             self.pixel_key[y, x] = -1
             index[y, x] = 0
-        ti.loop_config(serialize=self.serial)
-        for g in range(self.n.shape[0]):
-            s0, off = self.state_start[g], self.off[g]
-            for i in range(off, off + self.n[g]):
-                s = s0 + i - off
-                if drop[self.state_pp[s]] != 0:
-                    self.state_keep[s] = ti.i8(0)
-                p = self.index_pixel(b, i)
-                if self.state_keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                    key = self.index_key(s)
-                    if ti.static(self.serial):  # one task, s increasing: the last larger key wins
-                        if key > self.pixel_key[p // w, p % w]:
-                            self.pixel_key[p // w, p % w] = key
-                            index[p // w, p % w] = self.seq[b, i]
-                    else:
-                        ti.atomic_max(self.pixel_key[p // w, p % w], key)
+        self.for_states(self.claim_pixel, b, ti.static((drop, index)))
         if ti.static(not self.serial):  # the winners write their Seq
-            for g in range(self.n.shape[0]):
-                s0, off = self.state_start[g], self.off[g]
-                for i in range(off, off + self.n[g]):
-                    s = s0 + i - off
-                    p = self.index_pixel(b, i)
-                    if self.state_keep[s] != 0 and self.seq[b, i] > 0 and p >= 0:
-                        if self.pixel_key[p // w, p % w] == self.index_key(s):
-                            index[p // w, p % w] = self.seq[b, i]
+            self.for_states(self.write_winner, b, ti.static((drop, index)))
         self.compact(b, self.state_keep)
+
+    @ti.func
+    def claim_pixel(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """``hand_over`` for particle s (slot i): drop it with its PP, else bid for its pixel.  A serial
+        loop visits s in increasing order, so the last larger key wins at once; parallel loops
+        take the atomic maximum and let :meth:`write_winner` write the Seq."""
+        drop, index = ti.static(arrays)
+        w = ti.static(self.label.shape[1])
+        if drop[self.state_pp[s]] != 0:
+            self.state_keep[s] = ti.i8(0)
+        p = self.index_pixel(b, s, i)
+        if p >= 0:
+            key = self.index_key(s)
+            if ti.static(self.serial):
+                if key > self.pixel_key[p // w, p % w]:
+                    self.pixel_key[p // w, p % w] = key
+                    index[p // w, p % w] = self.seq[b, i]
+            else:
+                ti.atomic_max(self.pixel_key[p // w, p % w], key)
+
+    @ti.func
+    def write_winner(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """The particle that won its pixel writes its Seq there (parallel ``hand_over``)."""
+        _, index = ti.static(arrays)
+        w = ti.static(self.label.shape[1])
+        p = self.index_pixel(b, s, i)
+        if p >= 0 and self.pixel_key[p // w, p % w] == self.index_key(s):
+            index[p // w, p % w] = self.seq[b, i]
 
     @ti.kernel
     def read_seq(self, b: ti.i32, seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
         """The Seq of every live particle, in state order."""
         self.state_starts()
-        ti.loop_config(serialize=self.serial)
-        for g in range(self.n.shape[0]):
-            s0, off = self.state_start[g], self.off[g]
-            for i in range(off, off + self.n[g]):
-                seq[s0 + i - off] = self.seq[b, i]
+        self.for_states(self.copy_seq, b, ti.static((seq,)))
+
+    @ti.func
+    def copy_seq(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        seq = ti.static(arrays[0])
+        seq[s] = self.seq[b, i]

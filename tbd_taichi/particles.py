@@ -215,18 +215,7 @@ class ParticlePool:
 
     def state(self) -> dict:
         """Live particles of the current buffer: arrays x, vx, y, vy, inten, e, tp, seq, group, slot, logw."""
-        group = np.repeat(np.arange(self.n_groups), self.counts)
-        return self._read_states(self._slots_in_order(group, self.counts), group)
-
-    def _read_states(self, slots: np.ndarray, group: np.ndarray) -> dict:
-        """The states of ``slots`` (one launch), with their ``group``."""
-        floats, ints = np.empty((len(FLOAT_STATE) + 1, len(slots)), np.float32), np.empty((len(INT_STATE), len(slots)), np.int32)
-        if len(slots):
-            self.k.read_slots(self.buf, slots, floats, ints)
-        out = dict(zip(FLOAT_STATE + ("logw",), floats))
-        out.update(zip(INT_STATE, ints))
-        out.update(group=group, slot=slots.astype(np.int64))
-        return out
+        return self.states_at(np.arange(int(self.counts.sum())))
 
     def _slots_in_order(self, group: np.ndarray, per_group: np.ndarray) -> np.ndarray:
         """Slots of particles listed by non-decreasing ``group``: each group's k-th goes to off_g + k."""
@@ -290,7 +279,14 @@ class ParticlePool:
         index = np.asarray(index, dtype=np.int64).reshape(-1)
         group = np.repeat(np.arange(self.n_groups), self.counts)[index]
         slots = (self.off[group] + index - (np.cumsum(self.counts) - self.counts)[group]).astype(np.int32)
-        return self._read_states(slots, group)
+        floats = np.empty((len(FLOAT_STATE) + 1, len(slots)), np.float32)  # and the log-weight
+        ints = np.empty((len(INT_STATE), len(slots)), np.int32)
+        if len(slots):
+            self.k.read_slots(self.buf, slots, floats, ints)
+        out = dict(zip(FLOAT_STATE + ("logw",), floats))
+        out.update(zip(INT_STATE, ints))
+        out.update(group=group, slot=slots.astype(np.int64))
+        return out
 
     def eliminate(self, pp, size, take, phase) -> tuple[np.ndarray, np.ndarray]:
         """Eq. 37 on the device: particle s (state order) belongs to population pp[s] of ``size[k]``

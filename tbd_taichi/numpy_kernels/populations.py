@@ -37,14 +37,11 @@ def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: 
 
 
 class NumpyPopulationKernels:
-    """Twin of ``PopulationKernels``; uses the ``NumpyParticleKernels`` arrays."""
-
-    def state_slots(self) -> np.ndarray:
-        """Slots of the live particles in state order (group, then slot)."""
-        return np.concatenate([np.arange(o, o + n) for o, n in zip(self.off, self.n)]).astype(np.int64)
+    """Twin of ``PopulationKernels``; uses the ``NumpyParticleKernels`` arrays.  The slabs lie in group
+    order, so the live slots in increasing order are the particles in state order."""
 
     def eliminate(self, b, pp, table, keep, sums) -> None:
-        slots = self.state_slots()
+        slots = self.live_slots()
         size, take, phase = table[0].astype(np.int64), table[1].astype(np.int64), table[2]
         n_pp = len(size)
         keep[:] = ~spread_removal(rank_in_population(pp.astype(np.int64), size), size[pp], take[pp], phase[pp])
@@ -59,7 +56,7 @@ class NumpyPopulationKernels:
 
     def hand_over(self, b, drop, index) -> None:
         pp, size, kept = self._eliminated
-        slots = self.state_slots()
+        slots = self.live_slots()
         keep = kept & (drop[pp] == 0)
         h, w = index.shape
         x = np.floor(self.x[b, slots] + np.float32(0.5)).astype(np.int64)
@@ -72,4 +69,4 @@ class NumpyPopulationKernels:
         self.keep_particles(b, keep)
 
     def read_seq(self, b, seq) -> None:
-        seq[:] = self.seq[b, self.state_slots()]
+        seq[:] = self.seq[b, self.live_slots()]
