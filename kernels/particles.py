@@ -16,10 +16,11 @@ import math
 import taichi as ti
 
 from .populations import PopulationKernels
-from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
+from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 TILE = 1024
 PAD = 4  # zero border of the weights' frame: a 5×5 window (Eq. 15) that touches the image stays inside it
+WALKS = 4  # interleaved merge walks per tile in draw_parents
 NEG_INF = -3.0e38
 TWO_PI = 2.0 * math.pi
 
@@ -85,7 +86,7 @@ class ParticleKernels(PopulationKernels):
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.label = i32(*frame_shape)
         self.population_fields(c, frame_shape)
-        self.normal = NormalTables()
+        self.normal, self.exponential = NormalTables(), ExponentialTables()
 
     # ------------------------------------------------------------ helpers
 
@@ -308,6 +309,14 @@ class ParticleKernels(PopulationKernels):
     # ------------------------------------------------------------ Eqs. 11–15
 
     @ti.func
+    def load_frame(self, z: ti.template()):
+        """The normalised frame z (H, W) into the middle of the zero-bordered field the weights read."""
+        ti.loop_config(serialize=self.serial)
+        for y in range(z.shape[0]):
+            for x in range(z.shape[1]):
+                self.z[y + PAD, x + PAD] = z[y, x]
+
+    @ti.func
     def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32):
         """Step 3, Eq. 15 in the log domain: for E = 1,
         log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
@@ -427,9 +436,13 @@ class ParticleKernels(PopulationKernels):
         self.normalise_weights(b)
 
     @ti.kernel
-    def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1)):
-        """Steps 3–4 in one launch: log-weights (Eq. 15), their normalisation, and each group's
-        largest E = 1 log-weight into ``best``."""
+    def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
+              z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """Steps 3–4 in one launch on the normalised frame z: log-weights (Eq. 15), their
+        normalisation, and each group's largest E = 1 log-weight into ``best``.  (Reading z in place
+        instead of a field is slower: the compiler reloads an argument array's pointer after every
+        store into the pool.)"""
+        self.load_frame(z)
         self.log_weights(b, psf_sigma, noise_sigma)
         self.normalise_weights(b)
         ti.loop_config(serialize=True)
@@ -462,16 +475,17 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def tile_spacings(self, seed: ti.u32, frame: ti.i32):
-        """Multinomial resampling, part 1: exponential spacings −log u (f64) over each group's output
-        slots, summed within tiles (spc), with the tile totals."""
+        """Multinomial resampling, part 1: Exp(1) spacings (f64, by the ziggurat: no logarithm for 99 %
+        of them) over each group's output slots, summed within tiles (spc), with the tile totals."""
         key = key_prefix(seed, frame, S_RESAMPLE)
+        w, k, f = ti.static(self.exponential.w, self.exponential.k, self.exponential.f)
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
             g = self.tile_group[t]
             s = ti.cast(0.0, ti.f64)
             if self.n[g] > 0:
                 for i in range(self.tile_start[t], self.out_tile_end(t)):
-                    s -= ti.log(uniform_f64_at(key, i))
+                    s += exponential_at(w, k, f, key, i)
                     self.spc[i] = s
             self.tile_spc[t] = s
 
@@ -480,10 +494,11 @@ class ParticleKernels(PopulationKernels):
         """Multinomial resampling, part 2: exclusive tile prefixes of the spacings and each group's
         total, which includes one more spacing (the (n_out + 1)-th, keyed on the group)."""
         key = key_prefix(seed, frame, S_RESAMPLE_END)
+        w, k, f = ti.static(self.exponential.w, self.exponential.k, self.exponential.f)
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
-            self.gspc[g] = self.exclusive_tile_prefix(g, self.tile_spc, self.tile_spc_prefix) - \
-                ti.log(uniform_f64_at(key, g))
+            self.gspc[g] = self.exclusive_tile_prefix(g, self.tile_spc, self.tile_spc_prefix) + \
+                exponential_at(w, k, f, key, g)
 
     @ti.func
     def draw_parents(self, systematic: ti.template(), seed: ti.u32, frame: ti.i32):
@@ -513,15 +528,42 @@ class ParticleKernels(PopulationKernels):
                     else:
                         u = (base + self.spc[i]) / scale
                     self.spc[i] = u * total
-                # merge the sorted positions with the parents' upper edges: one step per output or per
-                # parent passed, with no data-dependent branch (offspring counts are random)
-                p = self.first_slot_above(g, self.spc[i0])
-                i = i0
-                while i < i1:
-                    advance = ti.cast(p < last, ti.i32) & ti.cast(self.cum[p] <= self.spc[i], ti.i32)
-                    self.parent[i] = p  # final once i moves on
-                    i += 1 - advance
-                    p += advance
+                self.merge_parents(g, i0, i1, last)
+
+    @ti.func
+    def merge_parents(self, g: ti.i32, i0: ti.i32, i1: ti.i32, last: ti.i32):
+        """Eq. 18 for the sorted positions spc[i0:i1] of group g: parent[i] = the first slot above spc[i]
+        (at most ``last``).  A merge of the positions with the upper edges takes one step per output
+        or per parent passed, with no data-dependent branch (offspring counts are random).  The
+        outputs are cut into WALKS runs whose walks advance in the same loop: each step depends on
+        the one before, so interleaved walks keep the core busy while one waits for its loads."""
+        lo, end, p = ti.Vector([0] * WALKS), ti.Vector([0] * WALKS), ti.Vector([0] * WALKS)
+        common = i1 - i0 + last  # steps every walk needs (the minimum over walks)
+        for k in ti.static(range(WALKS)):
+            lo[k] = i0 + (i1 - i0) * k // WALKS
+            end[k] = i0 + (i1 - i0) * (k + 1) // WALKS
+            p[k] = last
+            if lo[k] < end[k]:
+                p[k] = self.first_slot_above(g, self.spc[lo[k]])
+                steps = end[k] - lo[k] + self.first_slot_above(g, self.spc[end[k] - 1]) - p[k]
+                common = ti.min(common, steps)
+            else:
+                common = 0
+        for _ in range(common):
+            for k in ti.static(range(WALKS)):
+                self.merge_step(lo, p, k, last)
+        for k in ti.static(range(WALKS)):
+            while lo[k] < end[k]:
+                self.merge_step(lo, p, k, last)
+
+    @ti.func
+    def merge_step(self, i: ti.template(), p: ti.template(), k: ti.template(), last: ti.i32):
+        """One step of walk k: output i[k] takes parent p[k] (final once i[k] moves on), then either
+        the output or the parent advances."""
+        advance = ti.cast(p[k] < last, ti.i32) & ti.cast(self.cum[p[k]] <= self.spc[i[k]], ti.i32)
+        self.parent[i[k]] = p[k]
+        i[k] += 1 - advance
+        p[k] += advance
 
     @ti.kernel
     def set_counts(self, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
@@ -612,14 +654,6 @@ class ParticleKernels(PopulationKernels):
         for y in range(labels.shape[0]):
             for x in range(labels.shape[1]):
                 self.label[y, x] = labels[y, x]
-
-    @ti.kernel
-    def load_frame(self, z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-        """The normalised frame the weights read."""
-        ti.loop_config(serialize=self.serial)
-        for y in range(z.shape[0]):
-            for x in range(z.shape[1]):
-                self.z[y + PAD, x + PAD] = z[y, x]
 
     @ti.func
     def gather(self, src: ti.i32):

@@ -23,6 +23,10 @@ ZIG_LAYERS = 128  # ziggurat for N(0, 1), Marsaglia & Tsang (2000): 128 layers o
 ZIG_R = 3.442619855899  # x_1, where the tail begins
 ZIG_V = 9.91256303526217e-3
 ZIG_TRIES = 32  # hashes one normal may use (accepts at the first with probability 0.988)
+EXP_LAYERS = 256  # ziggurat for Exp(1), Marsaglia & Tsang (2000): 256 layers of equal area EXP_V
+EXP_R = 7.69711747013104972  # x_1, where the tail begins
+EXP_V = 3.949659822581572e-3
+INV_2_25 = 1.0 / 33554432.0
 
 
 def ziggurat_layers() -> tuple[np.ndarray, np.ndarray]:
@@ -43,6 +47,24 @@ def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x[:-1].astype(np.float32), k, phi
 
 
+def exponential_layers() -> tuple[np.ndarray, np.ndarray]:
+    """Layer edges x_0 = V·e^R > x_1 = R > … > x_255 > x_256 = 0 and f_i = exp(−x_i) (f64).  Layer i ≥ 1 is
+    the box [0, x_i] × [f_i, f_{i+1}] of area V; layer 0 is [0, R] × [0, f(R)] plus the tail."""
+    x = np.zeros(EXP_LAYERS + 1)
+    x[0], x[1] = EXP_V * math.exp(EXP_R), EXP_R
+    for i in range(1, EXP_LAYERS - 1):
+        x[i + 1] = -math.log(EXP_V / x[i] + math.exp(-x[i]))
+    return x, np.exp(-x)
+
+
+def exponential_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(w, k, f): layer widths x_i (f64), the 24-bit fast-accept bounds k_i (m < k_i ⇒ u·x_i < x_{i+1}
+    for u = (2m + 1)·2^-25) and f_0…f_256."""
+    x, f = exponential_layers()
+    k = np.clip(np.floor(2.0 ** 24 * x[1:] / x[:-1] - 0.5), 0, None).astype(np.uint32)
+    return x[:-1], k, f
+
+
 @ti.data_oriented
 class NormalTables:
     """The ziggurat tables as fields (build after ``ti.init``); pass ``w, k, phi`` to :func:`normal_at`."""
@@ -54,6 +76,19 @@ class NormalTables:
         self.w.from_numpy(w)
         self.k.from_numpy(k)
         self.phi.from_numpy(phi)
+
+
+@ti.data_oriented
+class ExponentialTables:
+    """The exponential ziggurat's tables as fields; pass ``w, k, f`` to :func:`exponential_at`."""
+
+    def __init__(self):
+        w, k, f = exponential_tables()
+        self.w, self.k, self.f = ti.field(ti.f64, EXP_LAYERS), ti.field(ti.u32, EXP_LAYERS), \
+            ti.field(ti.f64, EXP_LAYERS + 1)
+        self.w.from_numpy(w)
+        self.k.from_numpy(k)
+        self.f.from_numpy(f)
 
 
 @ti.func
@@ -179,6 +214,55 @@ def normal_rejection(w: ti.template(), k: ti.template(), phi: ti.template(), pre
     return out
 
 
+@ti.func
+def exponential_position(h: ti.u32) -> ti.f64:
+    """Bits 8–31 of a draw as u = (2m + 1)·2^-25 in (0, 1), exact in f64."""
+    return ti.cast((h >> 8) * ti.u32(2) + ti.u32(1), ti.f64) * ti.f64(INV_2_25)
+
+
+@ti.func
+def exponential_at(w: ti.template(), k: ti.template(), f: ti.template(), prefix: ti.u32, index) -> ti.f64:
+    """One Exp(1) variate (f64) for the key with this prefix by the ziggurat (Marsaglia & Tsang 2000).
+
+    Draw d hashes index·ZIG_TRIES + d: bits 0–7 pick layer i, bits 8–31 the position u and x = u·x_i.
+    Accept at once if m < k_i (x under the curve: 98.9 %); the rest goes to
+    :func:`exponential_rejection`.  One hash, no logarithm, for most variates."""
+    base = ti.cast(index, ti.u32) * ti.u32(ZIG_TRIES)
+    h = hash_index(prefix, base)
+    i = ti.cast(h & ti.u32(EXP_LAYERS - 1), ti.i32)
+    out = exponential_position(h) * w[i]
+    if (h >> 8) >= k[i]:
+        out = exponential_rejection(w, k, f, prefix, base, h)
+    return out
+
+
+@ti.func
+def exponential_rejection(w: ti.template(), k: ti.template(), f: ti.template(), prefix: ti.u32, base: ti.u32,
+                          h0: ti.u32) -> ti.f64:
+    """The exponential ziggurat's slow path, from the rejected fast draw h0 on: in layer i ≥ 1 accept x if
+    f_i + U·(f_{i+1} − f_i) < exp(−x), U from a second hash of the draw; in layer 0 return the tail
+    R − ln U (the tail of Exp(1) beyond R is R plus an Exp(1)); otherwise a new draw.  After
+    ZIG_TRIES draws (probability < 1e-60) the last x is used."""
+    out = ti.f64(0.0)
+    h = h0
+    for d in range(ZIG_TRIES):
+        if d > 0:
+            h = hash_index(prefix, base + ti.cast(d, ti.u32))
+        u2 = ti.cast(unit_from_bits(lowbias32(h + ti.u32(GOLDEN))), ti.f64)
+        i = ti.cast(h & ti.u32(EXP_LAYERS - 1), ti.i32)
+        out = exponential_position(h) * w[i]
+        accept = (h >> 8) < k[i]
+        if not accept:
+            if i == 0:
+                out = ti.f64(EXP_R) - ti.log(u2)
+                accept = True
+            else:
+                accept = f[i] + u2 * (f[i + 1] - f[i]) < ti.exp(-out)
+        if accept:
+            break
+    return out
+
+
 @ti.kernel
 def fill_hash(out: ti.types.ndarray(dtype=ti.u32, ndim=1), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
     """out[i] = hash_key(seed, frame, stream, offset + i)."""
@@ -208,3 +292,12 @@ def fill_normal(out: ti.types.ndarray(dtype=ti.f32, ndim=1), w: ti.template(), k
     key = key_prefix(seed, frame, stream)
     for i in range(out.shape[0]):
         out[i] = normal_at(w, k, phi, key, offset + ti.cast(i, ti.u32))
+
+
+@ti.kernel
+def fill_exponential(out: ti.types.ndarray(dtype=ti.f64, ndim=1), w: ti.template(), k: ti.template(),
+                     f: ti.template(), seed: ti.u32, frame: ti.u32, stream: ti.u32, offset: ti.u32):
+    """out[i] = exponential_at(tables, key_prefix(seed, frame, stream), offset + i)."""
+    key = key_prefix(seed, frame, stream)
+    for i in range(out.shape[0]):
+        out[i] = exponential_at(w, k, f, key, offset + ti.cast(i, ti.u32))

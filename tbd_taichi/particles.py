@@ -115,6 +115,7 @@ class ParticlePool:
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
         self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
+        self._z = np.zeros(self.frame_shape, np.float32)  # the normalised frame weigh reads
         self._eliminated = None  # (pp, populations, keep) of the last eliminate, until its hand_over
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
@@ -342,7 +343,7 @@ class ParticlePool:
         z = np.asarray(z, dtype=np.float32)
         if z.shape != self.frame_shape:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
-        self.k.load_frame(np.ascontiguousarray(z))
+        self._z = np.ascontiguousarray(z)
 
     def predict(self, frame: int, top_up=None) -> None:
         """Steps 1–2: existence (Eqs. 7–8), newborn and initial draws, NCV propagation (Eqs. 9–10).
@@ -357,7 +358,7 @@ class ParticlePool:
 
     def weigh(self) -> None:
         """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
-        self.k.weigh(self.buf, self.psf_sigma, self.noise_sigma, self._best)
+        self.k.weigh(self.buf, self.psf_sigma, self.noise_sigma, self._best, self._z)
 
     def normalise(self) -> None:
         """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""

@@ -231,6 +231,33 @@ def test_resampling_is_unbiased(systematic):
     assert pool.counts[0] == n_out  # output count differs from input count
 
 
+@pytest.mark.parametrize("systematic", [False, True])
+def test_parents_are_the_first_slots_above_the_positions(systematic):
+    """Eq. 18 by a direct search: every output's parent is the first slot whose cumulative weight exceeds
+    its position, for output counts that leave some of a tile's interleaved walks empty (1–3), end
+    mid-tile or just past a tile, and for a group whose weight sits on a single particle."""
+    n_in = [1500, 40, 900, 5]
+    n_out = [[1, 2, 3, 7], [1025, 3, 1024, 2], [2049, 33, 4, 1]]
+    rng = np.random.default_rng(4)
+    pool = ParticlePool([2100, 100, 1100, 10], (8, 8), engine="taichi", seed=3)
+    pool.configure_groups(range(4), pb=0.0, pd=0.0)
+    for r, counts in enumerate(n_out):
+        pool.set_counts(n_in)
+        lw = pool._get("logw")
+        for g, n in enumerate(n_in):
+            lw[pool.off[g]:pool.off[g] + n] = rng.normal(0, 2.0, n) if g != 3 else [0, 0, 60, 0, 0]
+        pool._put("logw", lw)
+        pool.normalise()
+        pool.resample(r, n_out=counts, systematic=systematic)
+        parent, cum, pos = pool._get("parent"), pool._get("cum"), pool._get("spc")
+        for g, (n, m) in enumerate(zip(n_in, counts)):
+            o = int(pool.off[g])
+            ref = o + np.minimum(np.searchsorted(cum[o:o + n], pos[o:o + m], side="right"), n - 1)
+            np.testing.assert_array_equal(parent[o:o + m], ref, err_msg=f"rep {r} group {g}")
+            if g == 3:
+                assert (parent[o:o + m] == o + 2).all()
+
+
 def test_capacity_overflow_is_a_clear_error_and_changes_nothing(rng):
     (t, _), _ = make_pools(rng)
     before = t.state()

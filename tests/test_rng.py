@@ -100,6 +100,51 @@ def _half_normal_quantiles(k):
     return out
 
 
+@pytest.fixture(scope="module")
+def exponential_tables():
+    return trng.ExponentialTables()
+
+
+def taichi_exponentials(tables, n, seed, frame, stream, offset=0):
+    out = np.zeros(n, np.float64)
+    trng.fill_exponential(out, tables.w, tables.k, tables.f, seed, frame, stream, offset)
+    return out
+
+
+def test_exponential_layers_have_equal_area_and_close():
+    x, f = trng.exponential_layers()
+    assert np.all(np.diff(x) < 0) and x[-1] == 0 and x[1] == trng.EXP_R
+    np.testing.assert_allclose(x[1:-1] * (f[2:] - f[1:-1]), trng.EXP_V, rtol=1e-8)  # layers i ≥ 1
+    assert abs(x[-2] * (1 - f[-2]) - trng.EXP_V) < 1e-12  # the top layer closes at f(0) = 1
+    # layer 0: the box [0, R] × [0, e^−R] plus the tail ∫_R^∞ e^−x = e^−R
+    assert abs((trng.EXP_R + 1) * f[1] - trng.EXP_V) < 1e-12 and abs(x[0] * f[1] - trng.EXP_V) < 1e-15
+
+
+def test_exponential_matches_twin(exponential_tables):
+    n = 300_000  # about 3,300 rejection paths and 20 tail draws
+    for offset in (0, 0xFFFF0000 // trng.ZIG_TRIES):
+        t = taichi_exponentials(exponential_tables, n, 9, 8, 7, offset)
+        ref = nrng.exponential(9, 8, 7, np.arange(n) + offset)
+        np.testing.assert_allclose(t, ref, rtol=1e-14, atol=0)  # f64 exp/log may differ in the last ulp
+        assert (t == ref).mean() > 0.9999
+
+
+def test_exponential_moments_tails_and_shape(exponential_tables):
+    n = 1_000_000
+    x = taichi_exponentials(exponential_tables, n, 5, 2, 1)
+    assert x.min() > 0
+    assert abs(x.mean() - 1) < 4 / np.sqrt(n)  # Exp(1): mean 1, variance 1
+    assert abs(x.var() - 1) < 4 * np.sqrt(8 / n)  # var of (x − 1)² is 8
+    # the wedges and the tail beyond R = 7.70 carry the right mass: P(x > t) = e^−t
+    for t in (0.5, 1.0, 2.0, 4.0, trng.EXP_R, 9.0):
+        p = math.exp(-t)
+        assert abs((x > t).mean() - p) < 4 * np.sqrt(p * (1 - p) / n)
+    # chi-square over 256 equiprobable bins
+    counts = np.histogram(1 - np.exp(-x), bins=256, range=(0, 1))[0]
+    chi2 = ((counts - n / 256) ** 2 / (n / 256)).sum()
+    assert chi2 < 350  # 255 dof: P(χ² > 350) ≈ 1e-4
+
+
 def test_normal_independent_across_streams_and_signs(normal_tables):
     n = N
     a = taichi_normals(normal_tables, n, 5, 2, 1).astype(np.float64)

@@ -55,7 +55,6 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.tile_spc, self.tile_spc_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
         self.tile_moments = np.zeros((n_tiles, N_MOMENTS))
         self.map_pixel, self.map_cdf = np.zeros(map_capacity, np.int32), np.zeros(map_capacity)
-        self.z = np.zeros(frame_shape, F32)
         self.label = np.zeros(frame_shape, np.int32)
 
     # ------------------------------------------------------------ helpers
@@ -169,11 +168,11 @@ class NumpyParticleKernels(NumpyPopulationKernels):
 
     # ------------------------------------------------------------ Eqs. 11–15
 
-    def log_weights(self, b: int, psf_sigma: float, noise_sigma: float) -> None:
+    def log_weights(self, b: int, psf_sigma: float, noise_sigma: float, z: np.ndarray) -> None:
         i = self.live_slots()
         self.logw[i] = 0.0
         i = i[self.e[b, i] == 1]
-        h, w = self.z.shape
+        h, w = z.shape
         sig = F32(psf_sigma)
         inv2s2 = F32(1.0) / (F32(2.0) * sig * sig)
         norm = F32(1.0) / (F32(TWO_PI) * sig * sig)
@@ -186,7 +185,7 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         step = np.exp(F32(-2.0) * inv2s2)
         gx = psf_samples((cx - 2).astype(F32) - x, inv2s2, step, px, w)
         gy = psf_samples((cy - 2).astype(F32) - y, inv2s2, step, py, h)
-        zwin = self.z[np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]]
+        zwin = z[np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]]
         use = (gy[:, :, None] > 0) & (gx[:, None, :] > 0)
         sz = np.zeros(len(i), F32)
         for j in range(5):
@@ -207,8 +206,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.tile_cumulative()
         self.group_prefix()
 
-    def weigh(self, b: int, psf_sigma: float, noise_sigma: float, best: np.ndarray) -> None:
-        self.log_weights(b, psf_sigma, noise_sigma)
+    def weigh(self, b: int, psf_sigma: float, noise_sigma: float, best: np.ndarray, z: np.ndarray) -> None:
+        self.log_weights(b, psf_sigma, noise_sigma, z)
         self.normalise(b)
         best[:] = self.gmax_e
 
@@ -271,11 +270,11 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         return np.where(self.n[g] > 0, np.minimum(self.tile_start + TILE, self.off[g] + self.n_out[g]), 0)
 
     def tile_spacings(self, seed: int, frame: int) -> None:
-        spacing = -np.log(rng.uniform_f64(seed, frame, S_RESAMPLE, np.arange(self.capacity)))
+        spacing = rng.exponential(seed, frame, S_RESAMPLE, np.arange(self.capacity))
         self.tile_spc[:] = self._tile_cumsum(spacing, self._out_tile_ends(), self.spc)
 
     def group_spacings(self, seed: int, frame: int) -> None:
-        end = -np.log(rng.uniform_f64(seed, frame, S_RESAMPLE_END, np.arange(len(self.off))))
+        end = rng.exponential(seed, frame, S_RESAMPLE_END, np.arange(len(self.off)))
         for g in range(len(self.off)):
             self.gspc[g] = self._exclusive_prefix(self.tile_spc, self.gt0[g], self.gt1[g], self.tile_spc_prefix) + end[g]
 
@@ -305,9 +304,6 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.draw_parents(systematic, seed, frame)
         self.gather(b)
         self.n[:] = self.n_out
-
-    def load_frame(self, z: np.ndarray) -> None:
-        self.z[...] = z
 
     def write_slots(self, b, slots, floats, ints, counts) -> None:
         for name, value in zip(STATE, list(floats) + list(ints)):

@@ -1,11 +1,12 @@
 """NumPy twin of ``tbd_taichi.kernels.rng``: the same bits for the same keys."""
 import numpy as np
 
-from ..kernels.rng import (GOLDEN, INV_2_24, INV_2_53, MIX1, MIX2, ZIG_LAYERS, ZIG_R, ZIG_TRIES,
-                           ziggurat_tables)
+from ..kernels.rng import (EXP_LAYERS, EXP_R, GOLDEN, INV_2_24, INV_2_25, INV_2_53, MIX1, MIX2, ZIG_LAYERS,
+                           ZIG_R, ZIG_TRIES, exponential_tables, ziggurat_tables)
 
 _U32 = np.uint32
 ZIG_W, ZIG_K, ZIG_PHI = ziggurat_tables()
+EXP_W, EXP_K, EXP_F = exponential_tables()
 
 
 def lowbias32(x: np.ndarray) -> np.ndarray:
@@ -80,6 +81,30 @@ def normal(seed, frame, stream, index) -> np.ndarray:
         accept = fast | wedge | tail_ok | (d == ZIG_TRIES - 1)
         out[todo[accept]] = x[accept]
         tail[todo[~in_tail & ~fast & (i == 0)]] = True
+        todo = todo[~accept]
+        if not len(todo):
+            break
+    return out
+
+
+def exponential(seed, frame, stream, index) -> np.ndarray:
+    """float64 Exp(1) for the keys by the ziggurat, draw for draw as the kernel's
+    ``exponential_at(tables, key_prefix(seed, frame, stream), index)``."""
+    index = np.asarray(index, dtype=np.int64).reshape(-1)
+    out = np.zeros(len(index))
+    todo = np.arange(len(index))
+    for d in range(ZIG_TRIES):
+        h = hash_key(seed, frame, stream, _as_u32(index[todo]) * _U32(ZIG_TRIES) + _U32(d))
+        i = (h & _U32(EXP_LAYERS - 1)).astype(np.int64)
+        x = ((h >> _U32(8)) * _U32(2) + _U32(1)).astype(np.float64) * INV_2_25 * EXP_W[i]
+        fast = (h >> _U32(8)) < EXP_K[i]
+        with np.errstate(over="ignore"):
+            u2 = unit_from_bits(lowbias32(h + _U32(GOLDEN))).astype(np.float64)
+        tail = ~fast & (i == 0)
+        wedge = ~fast & (i > 0) & (EXP_F[i] + u2 * (EXP_F[np.minimum(i + 1, EXP_LAYERS)] - EXP_F[i]) < np.exp(-x))
+        x = np.where(tail, EXP_R - np.log(u2), x)
+        accept = fast | tail | wedge | (d == ZIG_TRIES - 1)
+        out[todo[accept]] = x[accept]
         todo = todo[~accept]
         if not len(todo):
             break
