@@ -186,8 +186,15 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def mark_initial(self):
-        """Slots added since n_before (the top-up of Eq. 35) become initial particles (born = 2)."""
-        self.for_slots(False, self.first_added_slot, self.mark_if_added, ())
+        """Slots added since n_before (the top-up of Eq. 35) become initial particles (born = 2).  On the
+        CPU a loop per group over its added slots alone (usually none)."""
+        if ti.static(self.flat):
+            self.for_slots(False, self.first_added_slot, self.mark_if_added, ())
+        else:
+            ti.loop_config(serialize=self.serial)
+            for g in range(self.n.shape[0]):
+                for i in range(self.first_added_slot(g, ()), self.off[g] + self.n[g]):
+                    self.born[i] = 2
 
     @ti.func
     def copy_state(self, src: ti.i32, j: ti.i32, dst: ti.i32, i: ti.i32):
@@ -298,8 +305,14 @@ class ParticleKernels(PopulationKernels):
     @ti.kernel
     def predict(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
                 q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32):
-        """Steps 1–2 in one launch: existence (Eqs. 7–8), live counts ← ``counts`` with the added slots
-        as initial particles (Eq. 35), newborn and initial draws, propagation (Eqs. 9–10)."""
+        """Steps 1–2 in one launch (see ``predict_particles``)."""
+        self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
+
+    @ti.func
+    def predict_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(), q1: ti.f32,
+                          q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32):
+        """Steps 1–2: existence (Eqs. 7–8), live counts ← ``counts`` with the added slots as initial
+        particles (Eq. 35), newborn and initial draws, propagation (Eqs. 9–10)."""
         self.predict_existence(seed, frame, b)
         self.store_counts(counts)
         self.mark_initial()
@@ -327,11 +340,31 @@ class ParticleKernels(PopulationKernels):
         norm = ti.f32(1.0) / (ti.f32(TWO_PI) * psf_sigma * psf_sigma)
         inv_var = ti.f32(1.0) / (noise_sigma * noise_sigma)
         step = ti.exp(ti.f32(-2.0) * inv2s2)
-        self.for_slots(False, self.no_group_values, self.log_weight, (b, inv2s2, norm, inv_var, step))
+        args = (b, inv2s2, norm, inv_var, step)
+        if ti.static(self.flat):
+            self.for_slots(False, self.no_group_values, self.store_log_weight, args)
+            self.tile_maxima(b)
+        else:  # the tile maxima of step 4 in the same pass (one pass over the pool fewer)
+            ti.loop_config(serialize=self.serial)
+            for t in range(self.tile_start.shape[0]):
+                m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+                for i in range(self.tile_start[t], self.tile_end(t)):
+                    lw = self.log_weight(i, args)
+                    self.logw[i] = lw
+                    m = ti.max(m, lw)
+                    if self.e[b, i] == 1:
+                        me = ti.max(me, lw)
+                self.tile_max[t] = m
+                self.tile_max_e[t] = me
 
     @ti.func
-    def log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
-        """``log_weights`` for slot i."""
+    def store_log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
+        """``log_weights`` for slot i, as a ``for_slots`` body."""
+        self.logw[i] = self.log_weight(i, args)
+
+    @ti.func
+    def log_weight(self, i: ti.i32, args: ti.template()) -> ti.f32:
+        """Eq. 15's log-weight of slot i (0 for E = 0)."""
         b, inv2s2, norm, inv_var, step = args
         h, w = ti.static(self.z.shape[0] - 2 * PAD, self.z.shape[1] - 2 * PAD)
         lw = ti.f32(0.0)
@@ -354,7 +387,7 @@ class ParticleKernels(PopulationKernels):
                 sz += gy[j] * row
             a = self.inten[b, i] * norm
             lw = (a * sz - ti.f32(0.5) * a * a * gx.dot(gx) * gy.dot(gy)) * inv_var
-        self.logw[i] = lw
+        return lw
 
     # ------------------------------------------------------------ Eqs. 16–18, segmented and deterministic
 
@@ -423,9 +456,8 @@ class ParticleKernels(PopulationKernels):
                 self.cum[i] += pre
 
     @ti.func
-    def normalise_weights(self, b: ti.i32):
-        """Step 4: per-group maxima and f64 cumulative sums of the current log-weights (Eqs. 16–17)."""
-        self.tile_maxima(b)
+    def normalise_weights(self):
+        """Step 4 from the tile maxima: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
         self.group_maxima()
         self.tile_cumulative()
         self.group_prefix()
@@ -433,18 +465,24 @@ class ParticleKernels(PopulationKernels):
     @ti.kernel
     def normalise(self, b: ti.i32):
         """Step 4 alone, on log-weights set from outside."""
-        self.normalise_weights(b)
+        self.tile_maxima(b)
+        self.normalise_weights()
 
     @ti.kernel
     def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
               z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-        """Steps 3–4 in one launch on the normalised frame z: log-weights (Eq. 15), their
-        normalisation, and each group's largest E = 1 log-weight into ``best``.  (Reading z in place
-        instead of a field is slower: the compiler reloads an argument array's pointer after every
-        store into the pool.)"""
+        """Steps 3–4 in one launch (see ``weigh_particles``)."""
+        self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
+
+    @ti.func
+    def weigh_particles(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.template(),
+                        z: ti.template()):
+        """Steps 3–4 on the normalised frame z: log-weights (Eq. 15), their normalisation, and each
+        group's largest E = 1 log-weight into ``best``.  (Reading z in place instead of a field is
+        slower: the compiler reloads an argument array's pointer after every store into the pool.)"""
         self.load_frame(z)
         self.log_weights(b, psf_sigma, noise_sigma)
-        self.normalise_weights(b)
+        self.normalise_weights()
         ti.loop_config(serialize=True)
         for g in range(best.shape[0]):
             best[g] = self.gmax_e[g]
@@ -506,8 +544,9 @@ class ParticleKernels(PopulationKernels):
         cumulative-weight interval holds u_m·Σw.  Multinomial: u_m = S_m / S_{n_out+1}, S the running
         sum of exponential spacings, which are the order statistics of n_out i.i.d. U(0, 1) (the
         paper's independent uniforms, sorted); systematic: u_m = (m + u0_g)/n_out_g, u0_g keyed on
-        (seed, frame, S_SYSTEMATIC, g).  Sorted u lets
-        each tile binary-search its first parent and walk forward from there."""
+        (seed, frame, S_SYSTEMATIC, g).  Sorted u lets each tile binary-search its first parents and
+        walk forward from there.  (Gathering each tile's outputs right after its walk was slower than
+        a pass of its own.)"""
         key = key_prefix(seed, frame, S_SYSTEMATIC)
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
@@ -521,13 +560,12 @@ class ParticleKernels(PopulationKernels):
                     u0, scale = uniform_f64_at(key, g), ti.cast(self.n_out[g], ti.f64)
                 else:
                     base, scale = self.tile_spc_prefix[t], self.gspc[g]
+                to_weight = total / scale  # one division per tile, not per output
                 for i in range(i0, i1):  # the positions v_m = u_m·Σw, into spc
-                    u = ti.cast(0.0, ti.f64)
                     if ti.static(systematic):
-                        u = (ti.cast(i - off, ti.f64) + u0) / scale
+                        self.spc[i] = (ti.cast(i - off, ti.f64) + u0) * to_weight
                     else:
-                        u = (base + self.spc[i]) / scale
-                    self.spc[i] = u * total
+                        self.spc[i] = (base + self.spc[i]) * to_weight
                 self.merge_parents(g, i0, i1, last)
 
     @ti.func
@@ -587,8 +625,26 @@ class ParticleKernels(PopulationKernels):
     @ti.kernel
     def resample(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
                  systematic: ti.template()):
-        """Step 5 (Eqs. 17–18) in one launch: each group draws ``counts[g]`` parents from buffer b and
-        buffer 1 − b receives them; live counts become ``counts``."""
+        """Step 5 in one launch (see ``resample_particles``)."""
+        self.resample_particles(seed, frame, b, counts, systematic)
+
+    @ti.kernel
+    def step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+             q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32,
+             noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
+             z: ti.types.ndarray(dtype=ti.f32, ndim=2), n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
+             systematic: ti.template()):
+        """Steps 1–5 in one launch, for a filter with nothing to do between them (a launch costs
+        tens of µs on the CPU backend)."""
+        self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
+        self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
+        self.resample_particles(seed, frame, b, n_out, systematic)
+
+    @ti.func
+    def resample_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(),
+                           systematic: ti.template()):
+        """Step 5 (Eqs. 17–18): each group draws ``counts[g]`` parents from buffer b and buffer 1 − b
+        receives them; live counts become ``counts``."""
         self.set_out_counts(counts)
         if ti.static(not systematic):
             self.tile_spacings(seed, frame)

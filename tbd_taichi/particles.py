@@ -364,20 +364,28 @@ class ParticlePool:
         """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
         self.k.normalise(self.buf)
 
+    def _resampled_counts(self, n_out) -> np.ndarray:
+        """Checked output counts per group (default: the live counts; 0 for an empty group)."""
+        n_out = self.counts if n_out is None else self._checked_counts(n_out, "resampled count")
+        return np.where(self.counts > 0, n_out, 0).astype(np.int32)
+
     def resample(self, frame: int, n_out=None, systematic: bool = False) -> None:
         """Step 5 (Eqs. 17–18): each group draws ``n_out[g]`` particles (default: its live count)."""
-        n_out = self.counts if n_out is None else self._checked_counts(n_out, "resampled count")
-        n_out = np.where(self.counts > 0, n_out, 0).astype(np.int32)
+        n_out = self._resampled_counts(n_out)
         self.k.resample(self.seed, frame, self.buf, n_out, bool(systematic))
         self.buf = 1 - self.buf
         self.counts = n_out
 
     def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False) -> None:
-        """One full filter step on normalised frame ``z`` for every group."""
+        """One full filter step on normalised frame ``z`` for every group: predict, weigh and resample
+        in one launch."""
         self.load_frame(z)
-        self.predict(frame)
-        self.weigh()
-        self.resample(frame, n_out, systematic)
+        n_out = self._resampled_counts(n_out)
+        h, w = self.frame_shape
+        self.k.step(self.seed, frame, self.buf, self.counts, self.q1, self.q2, self.intensity_floor, w, h,
+                    self.psf_sigma, self.noise_sigma, self._best, self._z, n_out, bool(systematic))
+        self.buf = 1 - self.buf
+        self.counts = n_out
 
     def normalised_weights(self) -> np.ndarray:
         """Eq. 16 per live particle, in :meth:`state` order (for tests and diagnostics)."""

@@ -307,6 +307,31 @@ def test_estimates_eq19_and_covariance(rng):
         np.testing.assert_allclose(est.cov[g], cov, rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_one_launch_step_equals_the_three_stages(rng, engine):
+    """``step`` (predict, weigh and resample in one launch) gives the bits of the three calls, on
+    both engines, with and without new output counts and with systematic resampling."""
+    states = random_states(rng, CAPS, SHAPE)
+    z = rng.standard_normal(SHAPE).astype(np.float32)
+    pools = []
+    for _ in range(2):
+        p = ParticlePool(CAPS, SHAPE, engine=engine, seed=5, map_capacity=8)
+        p.configure_groups([0, 1], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([2], "copy", pb=0.3, pd=0.2)
+        p.set_state(states)
+        pools.append(p)
+    one, three = pools
+    for f, (n_out, systematic) in enumerate([(None, False), ([650, 1400, 0], False), ([500, 900, 300], True)]):
+        one.step(f, z, n_out=n_out, systematic=systematic)
+        three.load_frame(z)
+        three.predict(f)
+        three.weigh()
+        three.resample(f, n_out=n_out, systematic=systematic)
+        a, b = one.state(), three.state()
+        assert all(np.array_equal(a[k], b[k]) for k in a), f
+        np.testing.assert_array_equal(one.max_log_weights(), three.max_log_weights())
+
+
 def test_same_results_with_one_and_two_threads(rng):
     states = random_states(rng, CAPS, SHAPE)
     z = rng.standard_normal(SHAPE).astype(np.float32)

@@ -286,15 +286,22 @@ class NumpyParticleKernels(NumpyPopulationKernels):
                 continue
             slots = off + np.arange(m_out)
             if systematic:
-                u = (slots - off + u0[g]) / np.float64(m_out)
+                v = (slots - off + u0[g]) * (self.gtotal[g] / np.float64(m_out))
             else:
-                u = (self.tile_spc_prefix[self.gt0[g] + (slots - off) // TILE] + self.spc[slots]) / self.gspc[g]
+                v = (self.tile_spc_prefix[self.gt0[g] + (slots - off) // TILE] + self.spc[slots]) * \
+                    (self.gtotal[g] / self.gspc[g])
             live = off + np.arange(n)
             edges = self.tile_prefix[self.gt0[g] + (live - off) // TILE] + self.cum[live]  # Eq. 17
-            self.parent[slots] = off + np.minimum(np.searchsorted(edges, u * self.gtotal[g], side="right"), n - 1)
+            self.parent[slots] = off + np.minimum(np.searchsorted(edges, v, side="right"), n - 1)
 
     def set_counts(self, counts: np.ndarray) -> None:
         self.store_counts(counts)
+
+    def step(self, seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z, n_out,
+             systematic) -> None:
+        self.predict(seed, frame, b, counts, q1, q2, i_floor, width, height)
+        self.weigh(b, psf_sigma, noise_sigma, best, z)
+        self.resample(seed, frame, b, n_out, systematic)
 
     def resample(self, seed: int, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
         self.n_out[:] = np.where(self.n > 0, counts, 0)
