@@ -494,18 +494,13 @@ class ParticleKernels(PopulationKernels):
         return ti.min(self.tile_start[t] + TILE, self.off[g] + self.n_out[g])
 
     @ti.func
-    def upper_edge(self, gt0: ti.i32, off: ti.i32, p: ti.i32) -> ti.f64:
-        """Eq. 17: Σ_{j ≤ p} w_j of the group whose first tile is gt0 and first slot off (unnormalised,
-        f64) = the tile's prefix + the in-tile sum."""
-        return self.cum[p]
-
-    @ti.func
     def first_slot_above(self, g: ti.i32, v: ti.f64) -> ti.i32:
-        """Eq. 18: the first live slot of group g whose upper edge exceeds v (the last one if none)."""
-        gt0, lo, hi = self.gt0[g], self.off[g], self.off[g] + self.n[g] - 1
+        """Eq. 18: the first live slot of group g whose upper edge Σ_{j ≤ slot} w_j (cum, Eq. 17) exceeds v
+        (the last one if none)."""
+        lo, hi = self.off[g], self.off[g] + self.n[g] - 1
         while lo < hi:
             mid = (lo + hi) // 2
-            if self.upper_edge(gt0, self.off[g], mid) > v:
+            if self.cum[mid] > v:
                 hi = mid
             else:
                 lo = mid + 1
@@ -553,7 +548,7 @@ class ParticleKernels(PopulationKernels):
             g = self.tile_group[t]
             i0, i1, n = self.tile_start[t], self.out_tile_end(t), self.n[g]
             if n > 0 and i0 < i1:
-                off, gt0, total = self.off[g], self.gt0[g], self.gtotal[g]
+                off, total = self.off[g], self.gtotal[g]
                 last = off + n - 1
                 u0, scale, base = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
                 if ti.static(systematic):  # one uniform per group

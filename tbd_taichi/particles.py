@@ -343,7 +343,7 @@ class ParticlePool:
         z = np.asarray(z, dtype=np.float32)
         if z.shape != self.frame_shape:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
-        self._z = np.ascontiguousarray(z)
+        self._z = np.array(z, dtype=np.float32, order="C")  # a copy: the caller may reuse its array
 
     def predict(self, frame: int, top_up=None) -> None:
         """Steps 1–2: existence (Eqs. 7–8), newborn and initial draws, NCV propagation (Eqs. 9–10).

@@ -332,6 +332,21 @@ def test_one_launch_step_equals_the_three_stages(rng, engine):
         np.testing.assert_array_equal(one.max_log_weights(), three.max_log_weights())
 
 
+def test_weights_use_the_frame_as_it_was_loaded(rng):
+    """load_frame keeps its own copy: a caller that reuses its array before weigh changes nothing."""
+    (t, _), z = make_pools(rng)
+    ref = ParticlePool(CAPS, SHAPE, engine="taichi", seed=11, map_capacity=64)
+    ref.set_state({g: {k: v[t.state()["group"] == g] for k, v in t.state().items() if k not in ("group", "slot")}
+                   for g in range(len(CAPS))})
+    ref.load_frame(z.copy())
+    t.load_frame(z)
+    z[...] = 100.0
+    t.weigh()
+    ref.weigh()
+    np.testing.assert_array_equal(t.state()["logw"], ref.state()["logw"])
+    assert np.abs(t.state()["logw"]).max() > 0
+
+
 def test_same_results_with_one_and_two_threads(rng):
     states = random_states(rng, CAPS, SHAPE)
     z = rng.standard_normal(SHAPE).astype(np.float32)
