@@ -372,7 +372,8 @@ def test_same_results_with_one_and_two_threads(rng):
 
 def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):
     """The one-thread-per-slot layout that GPUs use, run on the CPU, against the tiled CPU layout:
-    every stage, multinomial and systematic resampling, a top-up, copies and an empty group."""
+    every stage, multinomial and systematic resampling, a top-up, copies, an empty group and the
+    one-launch step."""
     import tbd_taichi.particles as particles
 
     states = random_states(rng, CAPS, SHAPE)
@@ -391,16 +392,20 @@ def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):
             p.predict(f, top_up=[700, 1500, 300] if f == 1 else None)
             p.weigh()
             p.resample(f, n_out=[650, 0 if f == 2 else 1400, 300], systematic=f == 3)
-            out.append((p.state(), p.estimates().x))
+            out.append((p.state(), p.estimates().x, p.max_log_weights(), p._get("gmax")))
+        for f in range(4, 6):  # the one-launch step
+            p.step(f, z, n_out=[600, 1300, 250] if f == 4 else None, systematic=f == 5)
+            out.append((p.state(), p.estimates().x, p.max_log_weights(), p._get("gmax")))
         return out
 
     tiled = run()
     monkeypatch.setattr(particles, "one_thread_per_slot", lambda arch: True)
     flat = run()
-    for (st, xt), (sf, xf) in zip(tiled, flat):
+    for (st, *rest_t), (sf, *rest_f) in zip(tiled, flat):
         for key in st:
             np.testing.assert_array_equal(st[key], sf[key], err_msg=key)
-        np.testing.assert_array_equal(xt, xf)
+        for a, b in zip(rest_t, rest_f):  # Eq. 19 estimates, best E = 1 weights, Eq. 16's maxima
+            np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.parametrize("engine", ["taichi", "numpy"])
