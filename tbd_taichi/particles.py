@@ -338,12 +338,17 @@ class ParticlePool:
 
     # ------------------------------------------------------------ one step
 
-    def load_frame(self, z: np.ndarray) -> None:
-        """The normalised frame the next weights use (H, W), float32."""
-        z = np.asarray(z, dtype=np.float32)
+    def _checked_frame(self, z: np.ndarray) -> np.ndarray:
+        """z as a C-contiguous float32 (H, W) array (the caller's own array where it already is one)."""
+        z = np.ascontiguousarray(z, dtype=np.float32)
         if z.shape != self.frame_shape:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
-        self._z = np.array(z, dtype=np.float32, order="C")  # a copy: the caller may reuse its array
+        return z
+
+    def load_frame(self, z: np.ndarray) -> None:
+        """The normalised frame the next weights use (H, W), float32.  The pool keeps a copy: the
+        weights read it when ``weigh`` runs, and the caller may reuse its array before that."""
+        self._z = self._checked_frame(z).copy()
 
     def predict(self, frame: int, top_up=None) -> None:
         """Steps 1–2: existence (Eqs. 7–8), newborn and initial draws, NCV propagation (Eqs. 9–10).
@@ -378,12 +383,12 @@ class ParticlePool:
 
     def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False) -> None:
         """One full filter step on normalised frame ``z`` for every group: predict, weigh and resample
-        in one launch."""
-        self.load_frame(z)
+        in one launch (``z`` serves this step only; ``weigh`` keeps using the last ``load_frame``)."""
+        z = self._checked_frame(z)  # read in this launch, so no copy
         n_out = self._resampled_counts(n_out)
         h, w = self.frame_shape
         self.k.step(self.seed, frame, self.buf, self.counts, self.q1, self.q2, self.intensity_floor, w, h,
-                    self.psf_sigma, self.noise_sigma, self._best, self._z, n_out, bool(systematic))
+                    self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic))
         self.buf = 1 - self.buf
         self.counts = n_out
 
