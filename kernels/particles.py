@@ -343,19 +343,9 @@ class ParticleKernels(PopulationKernels):
         args = (b, inv2s2, norm, inv_var, step)
         if ti.static(self.flat):
             self.for_slots(False, self.no_group_values, self.store_log_weight, args)
-            self.tile_maxima(b)
+            self.tile_maxima(b, False, ())
         else:  # the tile maxima of step 4 in the same pass (one pass over the pool fewer)
-            ti.loop_config(serialize=self.serial)
-            for t in range(self.tile_start.shape[0]):
-                m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
-                for i in range(self.tile_start[t], self.tile_end(t)):
-                    lw = self.log_weight(i, args)
-                    self.logw[i] = lw
-                    m = ti.max(m, lw)
-                    if self.e[b, i] == 1:
-                        me = ti.max(me, lw)
-                self.tile_max[t] = m
-                self.tile_max_e[t] = me
+            self.tile_maxima(b, True, args)
 
     @ti.func
     def store_log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
@@ -392,15 +382,19 @@ class ParticleKernels(PopulationKernels):
     # ------------------------------------------------------------ Eqs. 16–18, segmented and deterministic
 
     @ti.func
-    def tile_maxima(self, b: ti.i32):
-        """Per tile: the largest log-weight, and the largest among E = 1 particles."""
+    def tile_maxima(self, b: ti.i32, weigh: ti.template(), args: ti.template()):
+        """Per tile: the largest log-weight, and the largest among E = 1 particles.  ``weigh``: compute
+        and store each log-weight first (``log_weight`` with ``args``), in the same pass."""
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
             m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
             for i in range(self.tile_start[t], self.tile_end(t)):
-                m = ti.max(m, self.logw[i])
+                if ti.static(weigh):
+                    self.logw[i] = self.log_weight(i, args)
+                lw = self.logw[i]
+                m = ti.max(m, lw)
                 if self.e[b, i] == 1:
-                    me = ti.max(me, self.logw[i])
+                    me = ti.max(me, lw)
             self.tile_max[t] = m
             self.tile_max_e[t] = me
 
@@ -465,7 +459,7 @@ class ParticleKernels(PopulationKernels):
     @ti.kernel
     def normalise(self, b: ti.i32):
         """Step 4 alone, on log-weights set from outside."""
-        self.tile_maxima(b)
+        self.tile_maxima(b, False, ())
         self.normalise_weights()
 
     @ti.kernel

@@ -39,12 +39,16 @@ def ziggurat_layers() -> tuple[np.ndarray, np.ndarray]:
     return x, np.exp(-0.5 * x * x)
 
 
+def fast_accept_bounds(x: np.ndarray, bits: int) -> np.ndarray:
+    """k_i with m < k_i ⇒ u·x_i < x_{i+1} for a ``bits``-bit position m and u = (2m + 1)·2^-(bits+1):
+    the draws that lie under the curve without evaluating it."""
+    return np.clip(np.floor(2.0 ** bits * x[1:] / x[:-1] - 0.5), 0, None).astype(np.uint32)
+
+
 def ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(w, k, phi): layer widths x_i as f32, the 23-bit fast-accept bounds k_i (m < k_i ⇒ u·x_i < x_{i+1}
-    for u = (2m + 1)·2^-24) and φ_0…φ_128 in f64."""
+    """(w, k, phi): layer widths x_i as f32, the 23-bit fast-accept bounds k_i and φ_0…φ_128 in f64."""
     x, phi = ziggurat_layers()
-    k = np.clip(np.floor(2.0 ** 23 * x[1:] / x[:-1] - 0.5), 0, None).astype(np.uint32)
-    return x[:-1].astype(np.float32), k, phi
+    return x[:-1].astype(np.float32), fast_accept_bounds(x, 23), phi
 
 
 def exponential_layers() -> tuple[np.ndarray, np.ndarray]:
@@ -58,11 +62,16 @@ def exponential_layers() -> tuple[np.ndarray, np.ndarray]:
 
 
 def exponential_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(w, k, f): layer widths x_i (f64), the 24-bit fast-accept bounds k_i (m < k_i ⇒ u·x_i < x_{i+1}
-    for u = (2m + 1)·2^-25) and f_0…f_256."""
+    """(w, k, f): layer widths x_i (f64), the 24-bit fast-accept bounds k_i and f_0…f_256."""
     x, f = exponential_layers()
-    k = np.clip(np.floor(2.0 ** 24 * x[1:] / x[:-1] - 0.5), 0, None).astype(np.uint32)
-    return x[:-1], k, f
+    return x[:-1], fast_accept_bounds(x, 24), f
+
+
+def table_field(values: np.ndarray, dtype):
+    """A 1-D field holding ``values`` (after ``ti.init``)."""
+    field = ti.field(dtype, values.shape[0])
+    field.from_numpy(values)
+    return field
 
 
 @ti.data_oriented
@@ -71,11 +80,7 @@ class NormalTables:
 
     def __init__(self):
         w, k, phi = ziggurat_tables()
-        self.w, self.k, self.phi = ti.field(ti.f32, ZIG_LAYERS), ti.field(ti.u32, ZIG_LAYERS), \
-            ti.field(ti.f64, ZIG_LAYERS + 1)
-        self.w.from_numpy(w)
-        self.k.from_numpy(k)
-        self.phi.from_numpy(phi)
+        self.w, self.k, self.phi = table_field(w, ti.f32), table_field(k, ti.u32), table_field(phi, ti.f64)
 
 
 @ti.data_oriented
@@ -84,11 +89,7 @@ class ExponentialTables:
 
     def __init__(self):
         w, k, f = exponential_tables()
-        self.w, self.k, self.f = ti.field(ti.f64, EXP_LAYERS), ti.field(ti.u32, EXP_LAYERS), \
-            ti.field(ti.f64, EXP_LAYERS + 1)
-        self.w.from_numpy(w)
-        self.k.from_numpy(k)
-        self.f.from_numpy(f)
+        self.w, self.k, self.f = table_field(w, ti.f64), table_field(k, ti.u32), table_field(f, ti.f64)
 
 
 @ti.func

@@ -12,9 +12,13 @@ from conftest import TEST_ARCH
 N = 200_000
 
 
-def taichi_draws(kind, n, seed, frame, stream, offset=0):
-    out = np.zeros(n, dtype=np.uint32 if kind == "hash" else np.float32)
-    getattr(trng, f"fill_{kind}")(out, seed, frame, stream, offset)
+DRAW_DTYPES = {"hash": np.uint32, "uniform": np.float32, "normal": np.float32, "exponential": np.float64}
+
+
+def taichi_draws(kind, n, seed, frame, stream, offset=0, tables=()):
+    """n draws of ``trng.fill_<kind>`` from key index ``offset`` on; ``tables``: a ziggurat's fields."""
+    out = np.zeros(n, dtype=DRAW_DTYPES[kind])
+    getattr(trng, f"fill_{kind}")(out, *tables, seed, frame, stream, offset)
     return out
 
 
@@ -36,15 +40,14 @@ def test_uniform_f64_matches_twin_and_is_uniform():
     assert abs(t.mean() - 0.5) < 4 * np.sqrt(1 / 12 / n)
 
 
+def normal_fields():
+    tables = trng.NormalTables()
+    return tables.w, tables.k, tables.phi
+
+
 @pytest.fixture(scope="module")
 def normal_tables():
-    return trng.NormalTables()
-
-
-def taichi_normals(tables, n, seed, frame, stream, offset=0):
-    out = np.zeros(n, np.float32)
-    trng.fill_normal(out, tables.w, tables.k, tables.phi, seed, frame, stream, offset)
-    return out
+    return normal_fields()
 
 
 def test_ziggurat_layers_have_equal_area_and_close():
@@ -61,7 +64,7 @@ def test_ziggurat_layers_have_equal_area_and_close():
 def test_normal_matches_twin(normal_tables):
     n = 300_000  # about 3,600 rejection paths and 140 tail draws
     for offset in (0, 0xFFFF0000 // trng.ZIG_TRIES):
-        t = taichi_normals(normal_tables, n, 9, 8, 7, offset)
+        t = taichi_draws("normal", n, 9, 8, 7, offset, tables=normal_tables)
         ref = nrng.normal(9, 8, 7, np.arange(n) + offset)
         # integer hashes and comparisons, exact f32 products; the wedge and tail tests are f64,
         # where LLVM's and NumPy's exp/log may differ in the last ulp
@@ -71,7 +74,7 @@ def test_normal_matches_twin(normal_tables):
 
 def test_normal_moments_tails_and_shape(normal_tables):
     n = 1_000_000
-    z = taichi_normals(normal_tables, n, 5, 2, 1).astype(np.float64)
+    z = taichi_draws("normal", n, 5, 2, 1, tables=normal_tables).astype(np.float64)
     assert abs(z.mean()) < 4 / np.sqrt(n)
     assert abs(z.var() - 1) < 4 * np.sqrt(2 / n)
     assert abs((z ** 3).mean()) < 4 * np.sqrt(15 / n)
@@ -102,13 +105,8 @@ def _half_normal_quantiles(k):
 
 @pytest.fixture(scope="module")
 def exponential_tables():
-    return trng.ExponentialTables()
-
-
-def taichi_exponentials(tables, n, seed, frame, stream, offset=0):
-    out = np.zeros(n, np.float64)
-    trng.fill_exponential(out, tables.w, tables.k, tables.f, seed, frame, stream, offset)
-    return out
+    tables = trng.ExponentialTables()
+    return tables.w, tables.k, tables.f
 
 
 def test_exponential_layers_have_equal_area_and_close():
@@ -123,7 +121,7 @@ def test_exponential_layers_have_equal_area_and_close():
 def test_exponential_matches_twin(exponential_tables):
     n = 300_000  # about 3,300 rejection paths and 20 tail draws
     for offset in (0, 0xFFFF0000 // trng.ZIG_TRIES):
-        t = taichi_exponentials(exponential_tables, n, 9, 8, 7, offset)
+        t = taichi_draws("exponential", n, 9, 8, 7, offset, tables=exponential_tables)
         ref = nrng.exponential(9, 8, 7, np.arange(n) + offset)
         np.testing.assert_allclose(t, ref, rtol=1e-14, atol=0)  # f64 exp/log may differ in the last ulp
         assert (t == ref).mean() > 0.9999
@@ -131,7 +129,7 @@ def test_exponential_matches_twin(exponential_tables):
 
 def test_exponential_moments_tails_and_shape(exponential_tables):
     n = 1_000_000
-    x = taichi_exponentials(exponential_tables, n, 5, 2, 1)
+    x = taichi_draws("exponential", n, 5, 2, 1, tables=exponential_tables)
     assert x.min() > 0
     assert abs(x.mean() - 1) < 4 / np.sqrt(n)  # Exp(1): mean 1, variance 1
     assert abs(x.var() - 1) < 4 * np.sqrt(8 / n)  # var of (x − 1)² is 8
@@ -147,8 +145,8 @@ def test_exponential_moments_tails_and_shape(exponential_tables):
 
 def test_normal_independent_across_streams_and_signs(normal_tables):
     n = N
-    a = taichi_normals(normal_tables, n, 5, 2, 1).astype(np.float64)
-    b = taichi_normals(normal_tables, n, 5, 2, 2).astype(np.float64)
+    a = taichi_draws("normal", n, 5, 2, 1, tables=normal_tables).astype(np.float64)
+    b = taichi_draws("normal", n, 5, 2, 2, tables=normal_tables).astype(np.float64)
     assert abs(np.mean(a * b)) < 4 / np.sqrt(n)  # streams uncorrelated
     assert abs(np.mean(a * a * b * b) - 1) < 4 * np.sqrt(8 / n)  # and independent (E[a²b²] = 1, var 8)
     assert abs(np.mean(a[:-1] * a[1:])) < 4 / np.sqrt(n)  # neighbouring indices too
@@ -186,11 +184,11 @@ def test_no_correlation_between_neighbouring_keys(axis):
 def test_same_numbers_with_one_and_two_threads():
     try:
         tbd_taichi.init("cpu", threads=1)
-        tables = trng.NormalTables()
-        one = (taichi_normals(tables, N, 1, 2, 3), taichi_draws("hash", N, 1, 2, 3))
+        tables = normal_fields()
+        one = (taichi_draws("normal", N, 1, 2, 3, tables=tables), taichi_draws("hash", N, 1, 2, 3))
         tbd_taichi.init("cpu", threads=2)
-        tables = trng.NormalTables()
-        two = (taichi_normals(tables, N, 1, 2, 3), taichi_draws("hash", N, 1, 2, 3))
+        tables = normal_fields()
+        two = (taichi_draws("normal", N, 1, 2, 3, tables=tables), taichi_draws("hash", N, 1, 2, 3))
     finally:
         tbd_taichi.init(TEST_ARCH)
     assert all(np.array_equal(a, b) for a, b in zip(one, two))
