@@ -263,8 +263,13 @@ class ParticlePool:
         if keep.shape != (int(self.counts.sum()),):
             raise ParameterError(f"need one keep flag per live particle ({int(self.counts.sum())}), got {keep.shape}")
         self.k.keep_particles(self.buf, keep.view(np.int8))
-        self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[keep],
-                                  minlength=self.n_groups).astype(np.int32)
+        self.counts = self._counts_kept(keep)
+
+    def _counts_kept(self, kept: np.ndarray) -> np.ndarray:
+        """Live counts per group after keeping the particles flagged in ``kept`` (state order)."""
+        before = np.concatenate(([0], np.cumsum(kept, dtype=np.int64)))
+        ends = np.cumsum(self.counts, dtype=np.int64)
+        return (before[ends] - before[ends - self.counts]).astype(np.int32)
 
     # ------------------------------------------------------------ particle populations (SGDS-PF Eqs. 36–38)
 
@@ -332,9 +337,7 @@ class ParticlePool:
             index[...] = 0
             return
         self.k.hand_over(self.buf, drop, index)
-        kept = (keep != 0) & (drop[pp] == 0)
-        self.counts = np.bincount(np.repeat(np.arange(self.n_groups), self.counts)[kept],
-                                  minlength=self.n_groups).astype(np.int32)
+        self.counts = self._counts_kept((keep != 0) & (drop[pp] == 0))
 
     # ------------------------------------------------------------ one step
 
@@ -355,11 +358,16 @@ class ParticlePool:
 
         ``top_up`` (optional counts per group) grows the groups after the existence step; the
         added slots become initial particles, drawn in the same launch as the newborns (Eq. 35)."""
-        counts = self.counts if top_up is None else \
-            self._checked_counts(np.maximum(np.asarray(top_up, np.int64).reshape(-1), self.counts), "live count")
+        counts = self._topped_up(top_up)
         h, w = self.frame_shape
         self.k.predict(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h)
         self.counts = counts
+
+    def _topped_up(self, top_up) -> np.ndarray:
+        """Live counts after the existence step: max(top_up, counts), checked (the counts if None)."""
+        if top_up is None:
+            return self.counts
+        return self._checked_counts(np.maximum(np.asarray(top_up, np.int64).reshape(-1), self.counts), "live count")
 
     def weigh(self) -> None:
         """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
@@ -369,10 +377,12 @@ class ParticlePool:
         """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
         self.k.normalise(self.buf)
 
-    def _resampled_counts(self, n_out) -> np.ndarray:
-        """Checked output counts per group (default: the live counts; 0 for an empty group)."""
-        n_out = self.counts if n_out is None else self._checked_counts(n_out, "resampled count")
-        return np.where(self.counts > 0, n_out, 0).astype(np.int32)
+    def _resampled_counts(self, n_out, live=None) -> np.ndarray:
+        """Checked output counts per group (default: the ``live`` counts, by default the current ones;
+        0 for an empty group)."""
+        live = self.counts if live is None else live
+        n_out = live if n_out is None else self._checked_counts(n_out, "resampled count")
+        return np.where(live > 0, n_out, 0).astype(np.int32)
 
     def resample(self, frame: int, n_out=None, systematic: bool = False) -> None:
         """Step 5 (Eqs. 17–18): each group draws ``n_out[g]`` particles (default: its live count)."""
@@ -381,13 +391,15 @@ class ParticlePool:
         self.buf = 1 - self.buf
         self.counts = n_out
 
-    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False) -> None:
-        """One full filter step on normalised frame ``z`` for every group: predict, weigh and resample
-        in one launch (``z`` serves this step only; ``weigh`` keeps using the last ``load_frame``)."""
+    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False, top_up=None) -> None:
+        """One full filter step on normalised frame ``z`` for every group: predict (with ``top_up``),
+        weigh and resample in one launch (``z`` serves this step only; ``weigh`` keeps using the last
+        ``load_frame``).  ``n_out`` defaults to the live counts after the top-up."""
         z = self._checked_frame(z)  # read in this launch, so no copy
-        n_out = self._resampled_counts(n_out)
+        counts = self._topped_up(top_up)
+        n_out = self._resampled_counts(n_out, counts)
         h, w = self.frame_shape
-        self.k.step(self.seed, frame, self.buf, self.counts, self.q1, self.q2, self.intensity_floor, w, h,
+        self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
                     self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic))
         self.buf = 1 - self.buf
         self.counts = n_out

@@ -101,6 +101,11 @@ def update_confidence(c: float, icef_value: float, scef_value: float) -> float:
     return 1.0 if v >= 1.0 else v
 
 
+def near_any(points: list, x: float, y: float) -> bool:
+    """Whether (x, y) lies within DUPLICATE_RADIUS px of any of ``points`` [(x, y), …]."""
+    return any(math.hypot(x - px, y - py) < DUPLICATE_RADIUS for px, py in points)
+
+
 def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     """Indices that bring a PP of n particles to ``size`` (Algorithm 2's "random eliminating or
     copying"): a random subset without replacement if n ≥ size, else all plus random copies.
@@ -110,30 +115,29 @@ def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
 
 
-def dense_ranks(values: np.ndarray, table_limit: int = 1 << 22) -> tuple[np.ndarray, int]:
-    """Rank of each integer among the distinct values (0 … k − 1, in value order), and k.
-    A lookup table replaces the sort when the values span at most ``table_limit``."""
+def dense_ranks(values: np.ndarray, table_limit: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+    """Rank of each integer among the distinct values (0 … k − 1, in value order), and the k
+    distinct values.  A lookup table replaces the sort when the values span at most ``table_limit``."""
     if len(values) == 0:
-        return np.zeros(0, np.int64), 0
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     lo, span = int(values.min()), int(values.max()) - int(values.min()) + 1
     if span > table_limit:
         distinct, ranks = np.unique(values, return_inverse=True)
-        return ranks.reshape(-1), len(distinct)
+        return ranks.reshape(-1), distinct
     present = np.zeros(span, bool)
     present[values - lo] = True
-    return (np.cumsum(present) - 1)[values - lo], int(present.sum())
+    return (np.cumsum(present) - 1)[values - lo], np.flatnonzero(present) + lo
 
 
 def populations(group: np.ndarray, seq: np.ndarray):
     """Particle populations as (block, Seq) pairs, ordered by block then Seq.
 
     Returns (block of each PP, PP index of each particle, particles per PP)."""
-    seq_rank, n_seq = dense_ranks(seq.astype(np.int64))
-    code, n_codes = dense_ranks(group.astype(np.int64) * max(n_seq, 1) + seq_rank)
-    counts = np.bincount(code, minlength=n_codes)
-    first = np.zeros(n_codes, np.int64)
-    first[code[::-1]] = np.arange(len(code))[::-1]  # a member of each PP, for its block
-    return group[first].astype(np.int64), code, counts
+    seq = seq.astype(np.int64)
+    lo = int(seq.min()) if len(seq) else 0
+    span = int(seq.max()) - lo + 1 if len(seq) else 1
+    code, keys = dense_ranks(group.astype(np.int64) * span + (seq - lo))  # block-major key
+    return keys // span, code, np.bincount(code, minlength=len(keys))
 
 
 def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:
@@ -289,13 +293,10 @@ class SGDSPF:
                 for b in np.unique(blocks)}
         pool.set_proposal_map(maps)
         pool.load_labels(self._labels(support))
-        pool.load_frame(z)
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
-        pool.predict(f, top_up=np.where(has_map, p.N_sump, pool.counts))
-        pool.weigh()
+        pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts))
         log_msw = float(pool.max_log_weights().max())
-        pool.resample(f)
         self._eliminate_and_hand_over(f)
         return log_msw
 
@@ -319,52 +320,52 @@ class SGDSPF:
             px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
         drop = np.zeros(len(counts), bool)
         handed = []
+        tracked = [t.last_xy() for t in self.active]
         for k in np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0)):
-            if self._near_track(px[k], py[k]):  # the target is tracked already
+            if near_any(tracked, px[k], py[k]):  # the target is tracked already
                 drop[k] = True
             elif len(handed) < len(self.free_groups):
                 drop[k] = True
                 handed.append(np.flatnonzero((inverse == k) & keep))
         members = pool.states_at(np.concatenate(handed)) if handed else None
         pool.hand_over(drop, self.pp_index)
-        self._start_tracks(f, members, [len(m) for m in handed], rng)
+        self._start_tracks(f, members, [len(m) for m in handed], rng, tracked)
 
-    def _near_track(self, x: float, y: float) -> bool:
-        return any(math.hypot(x - t.last_xy()[0], y - t.last_xy()[1]) < DUPLICATE_RADIUS for t in self.active)
-
-    def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator) -> None:
+    def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,
+                      tracked: list) -> None:
         """A tracking PF for each handed-over PP: ``members`` holds their particles' states, PP after
-        PP (``sizes`` each), resized to N_tpf particles (Algorithm 2)."""
+        PP (``sizes`` each), resized to N_tpf particles (Algorithm 2), all loaded in one launch.
+        ``tracked``: the active tracks' last positions, to which the new tracks are added."""
         n_tpf = self.p.N_tpf
-        new_states = {}
+        picks, groups = [], []
         for start, size in zip(np.cumsum(sizes) - sizes, sizes):
             if not self.free_groups:
                 break
-            st = {name: members[name][start:start + size] for name in STATE}
+            st = {name: members[name][start:start + size] for name in ("x", "y", "vx", "vy", "inten", "e")}
             e = st["e"] == 1
             x, y = float(st["x"][e].mean()), float(st["y"][e].mean())
-            if self._near_track(x, y):
+            if near_any(tracked, x, y):
                 continue
-            pick = resize_population(size, n_tpf, rng.random(max(n_tpf, size)))
-            group = self.free_groups.pop()
-            new_states[group] = {name: st[name][pick] for name in STATE}
-            track = Track(self.next_track_id, group, path=deque(maxlen=None if self.history else 1))
+            picks.append(start + resize_population(size, n_tpf, rng.random(max(n_tpf, size))))
+            groups.append(self.free_groups.pop())
+            track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1))
             self.next_track_id += 1
             track.path.append((f, x, y, float(st["vx"][e].mean()), float(st["vy"][e].mean()),
                                float(st["inten"][e].mean()), 1.0))
             self.active.append(track)
-        if new_states:
-            self.tracks_pool.set_state(new_states)
+            tracked.append((x, y))
+        if groups:
+            order = np.argsort(groups)
+            index = np.concatenate([picks[k] for k in order])
+            self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
+                                         {name: members[name][index] for name in STATE}, np.asarray(groups))
 
     def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
         p, pool = self.p, self.tracks_pool
         if not self.active:
             return []
-        pool.load_frame(z)
-        pool.predict(f)
-        pool.weigh()
+        pool.step(f, z)
         log_mtw = pool.max_log_weights()
-        pool.resample(f)
         est = pool.estimates()
         rows = []
         h, w = self.shape

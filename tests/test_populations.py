@@ -141,3 +141,22 @@ def test_index_image_prefers_the_larger_population_then_the_later_particle(engin
     pool.hand_over(np.zeros(len(counts), bool), index)
     assert index[3, 4] == 2 and index[6, 2] == 3 and index[1, 9] == 3
     assert np.count_nonzero(index) == 3
+
+
+@pytest.mark.parametrize("seq_span", [7, 1 << 24])  # lookup-table and sort paths of dense_ranks
+def test_populations_number_block_seq_pairs_in_order(seq_span):
+    """Against np.unique over (block, Seq) rows: same PP order (block, then Seq), the PP of every
+    particle, its block and its size; Seq 0 and a Seq shared by two blocks included."""
+    rng = np.random.default_rng(seq_span)
+    group = np.sort(rng.integers(0, 5, 3001))
+    seq = rng.integers(0, seq_span, 3001)
+    seq[::97] = 0
+    seq[group == 3] = seq[group == 2][:1] if (group == 2).any() else 5
+    pairs, inverse_ref, counts_ref = np.unique(np.stack([group, seq], 1), axis=0, return_inverse=True,
+                                               return_counts=True)
+    pp_block, inverse, counts = populations(group, seq.astype(np.int32))
+    np.testing.assert_array_equal(pp_block, pairs[:, 0])
+    np.testing.assert_array_equal(inverse, inverse_ref.reshape(-1))
+    np.testing.assert_array_equal(counts, counts_ref)
+    empty = populations(np.zeros(0, np.int64), np.zeros(0, np.int32))
+    assert all(len(a) == 0 for a in empty)
