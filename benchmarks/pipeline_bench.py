@@ -2,9 +2,10 @@
 
 320×256 (the paper's camera format) with the SNR 1.2, 1.4 and 2.0 presets, and 1024×1024 with
 the 1.4 preset; on a GPU backend also 4096×4096.  Writes bench_pipeline_<arch>.md and .json
-into --out (default docs/results).
+into --out (default docs/results); with --frontend-process (normalisation and saliency in a
+second process) bench_pipeline_<arch>_frontend_process.md and .json.
 
-    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20] [--out docs/results]
+    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20] [--frontend-process] [--out docs/results]
 """
 from __future__ import annotations
 
@@ -24,22 +25,27 @@ def main() -> None:
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--frames", type=int, default=20)
     parser.add_argument("--out", default=str(OUT), help="output folder (default docs/results)")
+    parser.add_argument("--frontend-process", action="store_true",
+                        help="normalisation and saliency in a second process (SGDSPF(frontend_process=True))")
     args = parser.parse_args()
     cases = CASES + (GPU_CASES if args.arch != "cpu" else [])
-    results, lines = [], [f"# SGDS-PF pipeline benchmark ({args.arch})", "",
-                          f"`python benchmarks/pipeline_bench.py --arch {args.arch} --frames {args.frames}` "
-                          "(same as `tbd-taichi bench --shape H W --snr S`); median ms/frame after a 3-frame warm-up.", ""]
+    flag = " --frontend-process" if args.frontend_process else ""
+    results, lines = [], [f"# SGDS-PF pipeline benchmark ({args.arch}{flag})", "",
+                          f"`python benchmarks/pipeline_bench.py --arch {args.arch} --frames {args.frames}{flag}` "
+                          f"(same as `tbd-taichi bench --shape H W --snr S{flag}`); median ms/frame after a 3-frame "
+                          "warm-up.", ""]
     for shape, snr in cases:
         frames = args.frames if shape[0] < 1024 else max(5, args.frames // (4 if shape[0] < 4096 else 8))
-        result = run_bench(shape, snr=snr, n_frames=frames, arch=args.arch)
+        result = run_bench(shape, snr=snr, n_frames=frames, arch=args.arch, frontend_process=args.frontend_process)
         results.append(result)
         table = format_table(result)
         print(table, flush=True)
         lines += ["```", table, "```", ""]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"bench_pipeline_{args.arch}.md").write_text("\n".join(lines))
-    (out / f"bench_pipeline_{args.arch}.json").write_text(json.dumps(results, indent=1))
+    name = f"bench_pipeline_{args.arch}" + ("_frontend_process" if args.frontend_process else "")
+    (out / f"{name}.md").write_text("\n".join(lines))
+    (out / f"{name}.json").write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":

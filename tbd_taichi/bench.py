@@ -15,9 +15,15 @@ per frame after a warm-up, median over the timed frames):
 ``pipeline=False`` (``--no-pipeline``) times only ``normalise`` and ``saliency`` (with a
 :class:`SaliencyExtractor`), plus ``particles`` if asked.
 
-``total`` is the sum of the stage medians; ``update_ms`` the median wall time of one
-``update`` call (or of the saliency step) and ``fps`` its inverse; ``peak_rss_mib`` the process's peak resident memory
-after the engine's run (it includes everything measured before it in the same process).
+``frontend_process=True`` (``--frontend-process``): the tracker runs normalisation and saliency
+in a second process, one frame ahead (:mod:`tbd_taichi.frontend`).  Their times are then the
+child's own, spent alongside the particle filters, and the stage ``waiting`` is this process's
+wait for the child (hand-over of the frame, copies of z and the proposal map).
+
+``total`` is the sum of the stage medians (CPU work, in either process); ``update_ms`` the median
+wall time of one ``update`` call (or of the saliency step) and ``fps`` its inverse;
+``peak_rss_mib`` the peak resident memory after the engine's run, of this process (everything
+measured before in it included) plus its largest ended child (the front-end process).
 """
 from __future__ import annotations
 
@@ -56,21 +62,22 @@ def benchmark_pool(shape, particles: int, groups: int, engine: str, snr: float, 
     return pool
 
 
-def pipeline_stepper(shape, snr: float, engine: str):
-    """One SGDSPF.update per call; returns the seconds each pipeline stage took."""
+def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = False):
+    """One SGDSPF.update per call, which returns the seconds each pipeline stage took; and a function
+    that stops the tracker's front-end process (if any)."""
     from .sgds import SGDSPF
 
-    tracker = SGDSPF(shape, snr=snr, engine=engine, history=False)
+    tracker = SGDSPF(shape, snr=snr, engine=engine, history=False, frontend_process=frontend_process)
 
     def step(frame: np.ndarray) -> dict[str, float]:
         before = dict(tracker.stage_seconds)
         tracker.update(frame)
         return {name: tracker.stage_seconds[name] - before[name] for name in before}
-    return step
+    return step, tracker.front.close
 
 
-def saliency_stepper(shape, snr: float, engine: str):
-    """Normalisation and the saliency stage only (no particle filters)."""
+def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = False):
+    """Normalisation and the saliency stage only (no particle filters; ``frontend_process`` unused)."""
     from .params import SGDSParams
     from .saliency import SaliencyExtractor
 
@@ -82,13 +89,14 @@ def saliency_stepper(shape, snr: float, engine: str):
         t1 = time.perf_counter()
         ext.push(z)
         return {"normalise": t1 - t0, "saliency": time.perf_counter() - t1}
-    return step
+    return step, lambda: None
 
 
 def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
-                 pipeline: bool = True) -> dict:
+                 pipeline: bool = True, frontend_process: bool = False) -> dict:
     """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
-    step = (pipeline_stepper if pipeline else saliency_stepper)(frames.shape[1:], snr, engine)
+    step, close = (pipeline_stepper if pipeline else saliency_stepper)(frames.shape[1:], snr, engine,
+                                                                      frontend_process)
     pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
     stages: dict[str, list[float]] = {}
     update = []
@@ -105,6 +113,7 @@ def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0
             update.append(t1 - t0)
             for name, value in seconds.items():
                 stages.setdefault(name, []).append(value)
+    close()  # a front-end process ends here, so its peak memory counts below
     medians = {name: _median_ms(v) for name, v in stages.items()}
     update_ms = _median_ms(update)
     return {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
@@ -124,24 +133,28 @@ def machine_description() -> str:
 
 
 def peak_rss_mib() -> float:
-    """Peak resident set size of this process, MiB."""
+    """Peak resident set size of this process plus that of its largest ended child process (the
+    tracker's front-end process), MiB."""
     import resource
     import sys
 
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss + resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB on Linux
 
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
-              seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True) -> dict:
-    """Benchmark every engine on the same simulated sequence; returns the JSON-ready result."""
+              seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
+              frontend_process: bool = False) -> dict:
+    """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
+    ``frontend_process``: the trackers run normalisation and saliency in a second process."""
     backend.keep_freed_memory()
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
-              "particles": particles, "groups": groups, "pipeline": pipeline, "engines": {}}
+              "particles": particles, "groups": groups, "pipeline": pipeline,
+              "frontend_process": bool(frontend_process and pipeline), "engines": {}}
     for engine in engines:
-        result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups, pipeline)
+        result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups, pipeline, frontend_process)
     return result
 
 
@@ -154,8 +167,9 @@ def format_table(result: dict) -> str:
     ratio = "taichi" in engines and "numpy" in engines
     head += f"{'numpy/taichi':>14}" if ratio else ""
     pool = f", {result['particles']} particles in {result['groups']} group(s)" if result.get("particles") else ""
+    front = ", front end in a second process" if result.get("frontend_process") else ""
     lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
-             f"{result['frames']} timed frames{pool}, arch {result['arch']}", head]
+             f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}", head]
     for stage in stages + ["update", "fps", "peak MiB"]:
         vals = {n: _row_value(engines[n], stage) for n in names}
         row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)

@@ -18,6 +18,10 @@ ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU
              "(a GPU if there is one, else the CPU)")
 
 
+FRONTEND_PROCESS_HELP = ("run normalisation and saliency in a second process, one frame ahead of the particle "
+                         "filters (a second CPU core; the same tracks, online rows one frame later)")
+
+
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--arch", default="cpu", choices=backend.ARCH_NAMES, help=ARCH_HELP)
     parser.add_argument("--threads", type=int, default=None, help="CPU threads for Taichi (default: all cores)")
@@ -82,6 +86,10 @@ def cmd_track(args) -> int:
     stream = args.method == "sgds" and args.paths == "online"  # rows go to the CSV as they come: constant memory
     if stream:
         method_only["history"] = False
+    if args.frontend_process:
+        if args.method != "sgds":
+            raise TBDError("--frontend-process applies to --method sgds only")
+        method_only["frontend_process"] = True
     tracker = make_tracker(args.method, source.shape, seed=args.seed, engine=args.engine,
                            bad_pixels=not args.no_bad_pixels, **chosen, **method_only)
     out = Path(args.out)
@@ -131,7 +139,8 @@ def cmd_bench(args) -> int:
     if args.particles < 0 or args.groups < 1 or (args.particles and args.particles < args.groups):
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
-                       particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline)
+                       particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
+                       frontend_process=args.frontend_process)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -244,6 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", action="store_true", help="show a progress bar")
+    tr.add_argument("--frontend-process", action="store_true",
+                    help="(sgds) " + FRONTEND_PROCESS_HELP)
     _common(tr)
     tr.set_defaults(func=cmd_track)
 
@@ -282,6 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--no-pipeline", action="store_true",
                     help="time only normalisation and saliency (and --particles), not the whole SGDSPF.update")
     be.add_argument("--json", action="store_true", help="print one JSON object as the last line")
+    be.add_argument("--frontend-process", action="store_true", help=FRONTEND_PROCESS_HELP)
     _common(be)
     be.set_defaults(func=cmd_bench)
     return parser

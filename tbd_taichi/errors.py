@@ -15,3 +15,7 @@ class BackendError(TBDError, RuntimeError):
 
 class ParameterError(TBDError, ValueError):
     """A parameter value outside its valid range."""
+
+
+class WorkerError(TBDError, RuntimeError):
+    """A helper process (the tracker's front-end process) failed, ended or stopped answering."""

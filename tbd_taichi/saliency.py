@@ -326,11 +326,18 @@ class SaliencyExtractor:
 
     def flush(self) -> list[SaliencyFrame]:
         """Finish the sequence: outputs for the last (up to) two frames, with truncated sums."""
+        return list(self.emit_remaining())
+
+    def emit_remaining(self):
+        """:meth:`flush` one frame at a time: each frame's output is emitted when the generator
+        reaches it, so the engine's proposal (kept there with ``details=False``) is that frame's
+        until the next one is drawn."""
         last = self.n_pushed - 1
         if last < 0:
-            return []
+            return
         self._layer1(last, last)
-        return [self._emit(f, last) for f in range(self.n_emitted, last + 1)]
+        for f in range(self.n_emitted, last + 1):
+            yield self._emit(f, last)
 
 
 def saliency_sequence(frames, **kwargs) -> list[SaliencyFrame]:

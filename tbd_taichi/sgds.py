@@ -37,11 +37,11 @@ import numpy as np
 
 from . import backend
 from .errors import InputError, ParameterError
-from .background import DEFAULT_BACKGROUND, Preprocessor
+from .background import DEFAULT_BACKGROUND
+from .frontend import FrontEnd, FrontEndProcess, FrontFrame
 from .params import SGDSParams
 from .particles import STATE, ParticlePool
 from .pf import birth_intensity_range
-from .saliency import SaliencyExtractor
 from .tables import TRACK_DTYPE, make_table
 
 MIN_FRAMES = 5
@@ -170,7 +170,7 @@ class SGDSPF:
 
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
                  max_tracks: int = 32, background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True,
-                 history: bool = True, **params):
+                 history: bool = True, frontend_process: bool = False, **params):
         if len(shape) != 2 or min(shape) < 8:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 8, got {tuple(shape)}")
         if max_tracks < 1:
@@ -181,10 +181,10 @@ class SGDSPF:
         if engine == "taichi":
             backend.ensure_init(arch)
         p = self.p
-        self.preprocess = Preprocessor(self.shape, background, bad_pixels, engine)
-        self.saliency = SaliencyExtractor(self.shape, snr=p.snr, block_size=p.L_ib, psf_sigma=p.psf_sigma,
-                                          engine=engine, details=False)
-        self.grid = self.saliency.grid
+        front = FrontEndProcess if frontend_process else FrontEnd
+        self.front = front(self.shape, snr=p.snr, L_ib=p.L_ib, psf_sigma=p.psf_sigma, background=background,
+                           bad_pixels=bad_pixels, engine=engine)
+        self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
         self.search = ParticlePool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
                                    map_capacity=self.shape[0] * self.shape[1], **common)
@@ -203,8 +203,9 @@ class SGDSPF:
         self.next_track_id = 1
         self.frames_in = 0
         self.online_rows: list[tuple] = []
-        self._z = {}
         self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
+        if frontend_process:  # this process's wait for the front end (its own stages run alongside)
+            self.stage_seconds["waiting"] = 0.0
 
     def _clock(self, stage: str, t0: float) -> float:
         now = time.perf_counter()
@@ -215,25 +216,29 @@ class SGDSPF:
 
     def update(self, frame) -> list[tuple]:
         """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
-        frame finished now (frame t − 2), or [] for the first two frames."""
+        frame finished now (frame t − 2, or t − 3 with ``frontend_process``), or [] before that."""
         t0 = time.perf_counter()
-        z = self.preprocess(frame, self.frames_in)
-        self._z[self.frames_in] = z
+        done = self.front.push(frame)
         self.frames_in += 1
-        t0 = self._clock("normalise", t0)
-        done = self.saliency.push(z)
-        self._clock("saliency", t0)
-        rows = []
-        for s in done:
-            rows += self._process(s.frame)
-        return rows
+        self._front_clock(t0)
+        return [row for f in done for row in self._process(f)]
 
     def finish(self) -> np.ndarray:
-        """Process the last two frames and return the tracks table of every confirmed track's whole path."""
+        """Process the last frames and return the tracks table of every confirmed track's whole path."""
         if self.frames_in < MIN_FRAMES:
             raise InputError(f"{self.frames_in} frame(s), but SGDS-PF needs at least {MIN_FRAMES}")
-        rows = [row for s in self.saliency.flush() for row in self._process(s.frame)]
+        t0 = time.perf_counter()
+        done = self.front.finish()
+        self._front_clock(t0)
+        rows = [row for f in done for row in self._process(f)]
+        self.front.close()
         return self.whole_paths() if self.history else make_table(rows, TRACK_DTYPE)
+
+    def _front_clock(self, t0: float) -> None:
+        """The front end's stage times (its own clock), and this process's wait for it."""
+        self.stage_seconds.update(self.front.stage_seconds)
+        if "waiting" in self.stage_seconds:
+            self._clock("waiting", t0)
 
     def whole_paths(self) -> np.ndarray:
         rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.reported
@@ -246,15 +251,10 @@ class SGDSPF:
 
     # ------------------------------------------------------------ one frame
 
-    def _proposal(self) -> np.ndarray:
-        return backend.to_host(self.saliency.engine.proposal)
-
-    def _process(self, f: int) -> list[tuple]:
-        z = self._z.pop(f)
-        for old in [k for k in self._z if k < f]:
-            del self._z[old]
+    def _process(self, front: FrontFrame) -> list[tuple]:
+        f, z = front.frame, front.z
         t0 = time.perf_counter()
-        log_msw = self._search_step(f, z, self._proposal())
+        log_msw = self._search_step(f, z, front.proposal)
         t0 = self._clock("searching", t0)
         rows = self._track_step(f, z, log_msw)
         self._clock("tracking", t0)
