@@ -15,6 +15,7 @@ Frames pass through shared memory; the results are the same bits, one frame late
 """
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -32,7 +33,10 @@ from .io import stream_frame
 FRONT_STAGES = ("normalise", "saliency")
 ANSWER_SECONDS = 300.0  # longest wait for the child (its first frame compiles the kernels if not cached)
 SLOTS = ("raw", "z", "proposal")  # shared (2, H, W) float32 buffers, used by frame parity
-CHILD_COMMAND = "import sys; from tbd_taichi.frontend import _child_main; _child_main(sys.argv[1])"
+# the child imports the package from the parent's sys.path (argv[2], JSON): ``python -c`` would put the
+# working directory first, and a source checkout there has no tbd_taichi.kernels (installed from kernels/)
+CHILD_COMMAND = ("import json, sys; sys.path[:] = json.loads(sys.argv[2]); "
+                 "from tbd_taichi.frontend import _child_main; _child_main(sys.argv[1])")
 KEY_VARIABLE = "TBD_TAICHI_FRONT_END_KEY"  # the channel's authentication key, hex, for the child
 
 
@@ -171,7 +175,7 @@ class FrontEndProcess:
         self._slots = {key: np.ndarray((2,) + self.shape, np.float32, buffer=m.buf) for key, m in zip(SLOTS, memory)}
         arch = backend.current().arch if options.get("engine") == "taichi" else "cpu"
         address, key = connection.arbitrary_address(connection.default_family), os.urandom(16)
-        process = subprocess.Popen([sys.executable, "-c", CHILD_COMMAND, address],
+        process = subprocess.Popen([sys.executable, "-c", CHILD_COMMAND, address, json.dumps(sys.path)],
                                    env={**os.environ, KEY_VARIABLE: key.hex()}, stdout=subprocess.DEVNULL)
         self._process = process
         channel: dict = {}  # the connection, for the finalizer (which must not hold self)
