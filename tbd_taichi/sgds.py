@@ -166,6 +166,10 @@ class SGDSPF:
     ``history=False`` keeps no paths (only each track's last point) and no online rows, so memory
     stays constant on endless streams; then ``finish()`` returns only the rows of the two flushed
     frames, and the caller keeps what ``update`` returned.
+
+    ``frontend_process=True`` runs normalisation and saliency in a second process, one frame
+    ahead (:mod:`tbd_taichi.frontend`): the same tracks, with ``update`` three frames behind;
+    ``finish()`` ends that process.
     """
 
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
