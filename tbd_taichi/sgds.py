@@ -205,7 +205,6 @@ class SGDSPF:
         self.active: list[Track] = []
         self.finished: list[Track] = []
         self.next_track_id = 1
-        self.frames_in = 0
         self.online_rows: list[tuple] = []
         self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
         if frontend_process:  # this process's wait for the front end (its own stages run alongside)
@@ -223,7 +222,6 @@ class SGDSPF:
         frame finished now (frame t − 2, or t − 3 with ``frontend_process``), or [] before that."""
         t0 = time.perf_counter()
         done = self.front.push(frame)
-        self.frames_in += 1
         self._front_clock(t0)
         return [row for f in done for row in self._process(f)]
 
@@ -237,6 +235,11 @@ class SGDSPF:
         rows = [row for f in done for row in self._process(f)]
         self.front.close()
         return self.whole_paths() if self.history else make_table(rows, TRACK_DTYPE)
+
+    @property
+    def frames_in(self) -> int:
+        """Raw frames taken so far (counted by the front end)."""
+        return self.front.frames_in
 
     def _front_clock(self, t0: float) -> None:
         """The front end's stage times (its own clock), and this process's wait for it."""
