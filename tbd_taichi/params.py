@@ -61,6 +61,11 @@ class SGDSParams:
     noise_sigma: float = 1.0  # σ of the noise (Eq. 13); 1 after normalisation
     devr_radius: float = 2.0  # radius of T_devr = radius/1.3 (Eq. 42); paper range 1.5–2.5 px
     min_peak_z: float = 0.0  # report a confirmed track only while its running peak z ≥ this (0: off, the paper)
+    # not in the paper: ICEF = 1 also when the geometric mean of MTW/MSW over the track's last
+    # icef_window frames is ≥ icef_mean_ratio (Eq. 40 alone starves confirmation at SNR ≤ 1.6;
+    # docs/results/suite_analysis.md); icef_window = 1 is Eq. 40 as printed
+    icef_window: int = 10
+    icef_mean_ratio: float = 0.05
 
     @classmethod
     def for_snr(cls, snr: float = 1.4, **overrides) -> "SGDSParams":
@@ -91,7 +96,8 @@ class SGDSParams:
             ("V_limit", self.V_limit >= 0, "≥ 0"), ("P_e", 0 <= self.P_e < 1, "in [0, 1)"),
             ("q1", self.q1 >= 0, "≥ 0"), ("q2", self.q2 >= 0, "≥ 0"), ("psf_sigma", self.psf_sigma > 0, "> 0"),
             ("noise_sigma", self.noise_sigma > 0, "> 0"), ("devr_radius", self.devr_radius > 0, "> 0"),
-            ("min_peak_z", self.min_peak_z >= 0, "≥ 0"),
+            ("min_peak_z", self.min_peak_z >= 0, "≥ 0"), ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
+            ("icef_mean_ratio", 0 < self.icef_mean_ratio <= 1, "in (0, 1]"),
         ]
         for name, ok, rule in checks:
             if not ok:

@@ -28,5 +28,11 @@ def test_overrides_and_their_validation():
         SGDSParams.for_snr(2.0, P_e=1.5)
     with pytest.raises(ParameterError, match="T_ft"):
         SGDSParams.for_snr(2.0, T_ft=0.0)
+    with pytest.raises(ParameterError, match="icef_window = 2.5 must be an integer ≥ 1"):
+        SGDSParams.for_snr(2.0, icef_window=2.5)
+    with pytest.raises(ParameterError, match="icef_window = 0"):
+        SGDSParams.for_snr(2.0, icef_window=0)
+    with pytest.raises(ParameterError, match="icef_mean_ratio"):
+        SGDSParams.for_snr(2.0, icef_mean_ratio=0.0)
     with pytest.raises(ParameterError, match="snr must be a number > 0"):
         SGDSParams.for_snr(-1)
