@@ -20,7 +20,9 @@ Choices where the paper is open (see the README for the reasons): the intensity 
 newborns is Eq. 26's [snr − 2, snr + 3] in σ units of the PSF peak, converted to total
 intensity (×2πΣ²) like the original PF; PE = ΣE/N_pp (the fraction of the PP's particles
 with E = 1); SCEF uses dev_d = √((var_x + var_y)/2 + |cov_xy|) and SCEF = T_devr/max(dev)
-when spread (the printed √cov can be imaginary); a track also ends when its estimate
+when spread (the printed √cov can be imaginary); ICEF is also 1 when MTW/MSW's geometric mean
+over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio`` (not in the paper,
+:func:`windowed_icef`); a track also ends when its estimate
 leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
 active track is masked and a potential target within 2 px of a track is dropped, so one
 target gives one track; of two tracks closer than 2 px the younger one is removed.
@@ -79,12 +81,9 @@ def peak_z(z: np.ndarray, x: float, y: float) -> float:
 
 
 def icef(log_mtw: float, log_msw: float) -> float:
-    """Eq. 40 on r = MTW/MSW (unnormalised E = 1 maxima, from log-weights)."""
-    if not np.isfinite(log_mtw) or log_mtw <= -1e37:
-        return 0.9
-    if not np.isfinite(log_msw) or log_msw <= -1e37:
-        return 1.0
-    r = math.exp(min(log_mtw - log_msw, 50.0))
+    """Eq. 40 on r = MTW/MSW (unnormalised E = 1 maxima, from log-weights; fallbacks as in
+    :func:`log_weight_ratio`: 0.9 without E = 1 track particles, 1 without E = 1 search particles)."""
+    r = math.exp(log_weight_ratio(log_mtw, log_msw))
     return r if r >= 1 else (1.0 if r >= 0.1 else 0.9)
 
 
