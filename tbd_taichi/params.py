@@ -96,7 +96,8 @@ class SGDSParams:
             ("V_limit", self.V_limit >= 0, "≥ 0"), ("P_e", 0 <= self.P_e < 1, "in [0, 1)"),
             ("q1", self.q1 >= 0, "≥ 0"), ("q2", self.q2 >= 0, "≥ 0"), ("psf_sigma", self.psf_sigma > 0, "> 0"),
             ("noise_sigma", self.noise_sigma > 0, "> 0"), ("devr_radius", self.devr_radius > 0, "> 0"),
-            ("min_peak_z", self.min_peak_z >= 0, "≥ 0"), ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
+            ("min_peak_z", self.min_peak_z >= 0, "≥ 0"),
+            ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
             ("icef_mean_ratio", 0 < self.icef_mean_ratio <= 1, "in (0, 1]"),
         ]
         for name, ok, rule in checks:
