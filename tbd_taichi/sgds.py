@@ -83,7 +83,12 @@ def peak_z(z: np.ndarray, x: float, y: float) -> float:
 def icef(log_mtw: float, log_msw: float) -> float:
     """Eq. 40 on r = MTW/MSW (unnormalised E = 1 maxima, from log-weights; fallbacks as in
     :func:`log_weight_ratio`: 0.9 without E = 1 track particles, 1 without E = 1 search particles)."""
-    r = math.exp(log_weight_ratio(log_mtw, log_msw))
+    return icef_of_log_ratio(log_weight_ratio(log_mtw, log_msw))
+
+
+def icef_of_log_ratio(log_r: float) -> float:
+    """Eq. 40 on r = exp(``log_r``): r if r ≥ 1, 1 if 0.1 ≤ r < 1, else 0.9."""
+    r = math.exp(log_r)
     return r if r >= 1 else (1.0 if r >= 0.1 else 0.9)
 
 
@@ -403,9 +408,9 @@ class SGDSPF:
         for t in list(self.active):
             g = t.group
             t.frames_without_e = t.frames_without_e + 1 if not np.isfinite(est.x[g]) else 0
-            t.log_ratios.append(log_weight_ratio(float(log_mtw[g]), log_msw))
-            intensity_cef = windowed_icef(icef(float(log_mtw[g]), log_msw), t.log_ratios, p.icef_window,
-                                          p.icef_mean_ratio)
+            log_r = log_weight_ratio(float(log_mtw[g]), log_msw)
+            t.log_ratios.append(log_r)
+            intensity_cef = windowed_icef(icef_of_log_ratio(log_r), t.log_ratios, p.icef_window, p.icef_mean_ratio)
             t.confidence = update_confidence(t.confidence, intensity_cef, scef(est.cov[g], p.T_devr))
             if np.isfinite(est.x[g]):  # Eq. 39
                 if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's
