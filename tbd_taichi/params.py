@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from .errors import ParameterError
 
+ICEF_REFERENCE_PIXELS = 200 * 200  # frame area at which icef_mean_ratio was chosen
 SNR_BANDS = (2.0, 1.8, 1.6, 1.4)  # lower edges of Table 2's columns [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6); then (0,1.4)
 
 # Table 2 point values per band: L_ib (px), N_sump^b, T_PE, T_PTp, T_ft, T_rt
@@ -63,9 +64,12 @@ class SGDSParams:
     min_peak_z: float = 0.0  # report a confirmed track only while its running peak z ≥ this (0: off, the paper)
     # not in the paper: ICEF = 1 also when the geometric mean of MTW/MSW over the track's last
     # icef_window frames is ≥ icef_mean_ratio (Eq. 40 alone starves confirmation at SNR ≤ 1.6;
-    # docs/results/suite_analysis.md); icef_window = 1 is Eq. 40 as printed
+    # docs/results/suite_analysis.md); icef_window = 1 is Eq. 40 as printed.  icef_mean_ratio holds
+    # for a 200×200 frame; other frames use it × (40,000 px / H·W)^icef_area_exponent, because MSW, an
+    # extreme of the noise, grows with the searched area (measured: ln MSW ≈ 0.45·ln(H·W) + const)
     icef_window: int = 10
     icef_mean_ratio: float = 0.05
+    icef_area_exponent: float = 0.45
 
     @classmethod
     def for_snr(cls, snr: float = 1.4, **overrides) -> "SGDSParams":
@@ -79,6 +83,11 @@ class SGDSParams:
             raise ParameterError(f"unknown SGDS-PF parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}")
         params = cls(snr=float(snr), L_ib=l_ib, N_sump=n_sump, T_PE=t_pe, T_PTp=t_ptp, T_ft=t_ft, T_rt=t_rt)
         return replace(params, **overrides).validated()
+
+    def icef_ratio_for(self, pixels: int) -> float:
+        """The ICEF window's threshold on the geometric mean of MTW/MSW for a frame of ``pixels`` px:
+        icef_mean_ratio × (ICEF_REFERENCE_PIXELS / pixels)^icef_area_exponent, at most 1."""
+        return min(self.icef_mean_ratio * (ICEF_REFERENCE_PIXELS / pixels) ** self.icef_area_exponent, 1.0)
 
     @property
     def T_devr(self) -> float:
@@ -99,6 +108,7 @@ class SGDSParams:
             ("min_peak_z", self.min_peak_z >= 0, "≥ 0"),
             ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
             ("icef_mean_ratio", 0 < self.icef_mean_ratio <= 1, "in (0, 1]"),
+            ("icef_area_exponent", self.icef_area_exponent >= 0, "≥ 0"),
         ]
         for name, ok, rule in checks:
             if not ok:

@@ -21,8 +21,8 @@ newborns is Eq. 26's [snr − 2, snr + 3] in σ units of the PSF peak, converted
 intensity (×2πΣ²) like the original PF; PE = ΣE/N_pp (the fraction of the PP's particles
 with E = 1); SCEF uses dev_d = √((var_x + var_y)/2 + |cov_xy|) and SCEF = T_devr/max(dev)
 when spread (the printed √cov can be imaginary); ICEF is also 1 when MTW/MSW's geometric mean
-over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio`` (not in the paper,
-:func:`windowed_icef`); a track also ends when its estimate
+over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio``, scaled to the frame area
+(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); a track also ends when its estimate
 leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
 active track is masked and a potential target within 2 px of a track is dropped, so one
 target gives one track; of two tracks closer than 2 px the younger one is removed.
@@ -226,6 +226,7 @@ class SGDSPF:
                                      vmax=p.V_limit, intensity=intensity, mu=p.mu)
         self.tracks_pool.configure_groups(np.arange(max_tracks), "copy", pb=p.P_b, pd=p.P_d_track,
                                           vmax=p.V_limit, intensity=intensity)
+        self.icef_ratio = p.icef_ratio_for(self.shape[0] * self.shape[1])  # the ICEF window's threshold
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
@@ -410,7 +411,7 @@ class SGDSPF:
             t.frames_without_e = t.frames_without_e + 1 if not np.isfinite(est.x[g]) else 0
             log_r = log_weight_ratio(float(log_mtw[g]), log_msw)
             t.log_ratios.append(log_r)
-            intensity_cef = windowed_icef(icef_of_log_ratio(log_r), t.log_ratios, p.icef_window, p.icef_mean_ratio)
+            intensity_cef = windowed_icef(icef_of_log_ratio(log_r), t.log_ratios, p.icef_window, self.icef_ratio)
             t.confidence = update_confidence(t.confidence, intensity_cef, scef(est.cov[g], p.T_devr))
             if np.isfinite(est.x[g]):  # Eq. 39
                 if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's

@@ -34,5 +34,7 @@ def test_overrides_and_their_validation():
         SGDSParams.for_snr(2.0, icef_window=0)
     with pytest.raises(ParameterError, match="icef_mean_ratio"):
         SGDSParams.for_snr(2.0, icef_mean_ratio=0.0)
+    with pytest.raises(ParameterError, match="icef_area_exponent = -0.5 must be ≥ 0"):
+        SGDSParams.for_snr(2.0, icef_area_exponent=-0.5)
     with pytest.raises(ParameterError, match="snr must be a number > 0"):
         SGDSParams.for_snr(-1)
