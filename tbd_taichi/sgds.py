@@ -80,14 +80,9 @@ def peak_z(z: np.ndarray, x: float, y: float) -> float:
     return float(window.max()) if window.size else float("nan")
 
 
-def icef(log_mtw: float, log_msw: float) -> float:
-    """Eq. 40 on r = MTW/MSW (unnormalised E = 1 maxima, from log-weights; fallbacks as in
-    :func:`log_weight_ratio`: 0.9 without E = 1 track particles, 1 without E = 1 search particles)."""
-    return icef_of_log_ratio(log_weight_ratio(log_mtw, log_msw))
-
-
 def icef_of_log_ratio(log_r: float) -> float:
-    """Eq. 40 on r = exp(``log_r``): r if r ≥ 1, 1 if 0.1 ≤ r < 1, else 0.9."""
+    """Eq. 40 on r = exp(``log_r``) = MTW/MSW (from :func:`log_weight_ratio`): r if r ≥ 1, 1 if
+    0.1 ≤ r < 1, else 0.9."""
     r = math.exp(log_r)
     return r if r >= 1 else (1.0 if r >= 0.1 else 0.9)
 

@@ -1,5 +1,6 @@
 """SGDS-PF end to end (Algorithms 1–2) and its confirmation arithmetic (Eqs. 40–43)."""
 import math
+from collections import deque
 
 import numpy as np
 import pytest
@@ -8,10 +9,8 @@ import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.errors import InputError
 from tbd_taichi.numpy_kernels.populations import spread_removal
-from collections import deque
-
-from tbd_taichi.sgds import (SGDSPF, icef, log_weight_ratio, resize_population, scef, update_confidence,
-                             windowed_icef)
+from tbd_taichi.sgds import (SGDSPF, icef_of_log_ratio, log_weight_ratio, resize_population, scef,
+                             update_confidence, windowed_icef)
 
 
 def run(shape, frames, snr, seed, engine="taichi", **params):
@@ -20,6 +19,11 @@ def run(shape, frames, snr, seed, engine="taichi", **params):
     for frame in scene.frames:
         tracker.update(frame)
     return tracker, tracker.finish(), scene
+
+
+def icef(log_mtw, log_msw):
+    """Eq. 40 from the two log-weights, as the tracking step composes it."""
+    return icef_of_log_ratio(log_weight_ratio(log_mtw, log_msw))
 
 
 def test_icef_eq40():
