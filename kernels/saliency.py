@@ -25,6 +25,7 @@ import taichi as ti
 
 LANES = 8
 NEG_INF = -3.0e38
+LEF_NO_CAP = 3.0e38  # upper intensity bound of the multi-frame LEF's per-frame term (no cap)
 ROW_BLOCK = 16  # rows per CPU task in parallel loops
 VEC = ti.types.vector(LANES, ti.f32)
 
@@ -328,9 +329,13 @@ def lef_log_weight(b, a, i_min, i_max):
 @ti.kernel
 def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), s: ti.i32, z: ti.template(),
                     valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
-                    row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), serial: ti.template()):
+                    memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
+                    row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
+                    serial: ti.template()):
     """Eqs. 24 and 27–29: I_rt = [I_acc2 > T_acc2] ∧ [I_acc == I_acc_max], tested 8 lanes at a time;
-    at I_rt pixels log Sal = log ω̌_lef (σ = 1), listed per row (row_x, row_logw) in increasing x."""
+    at I_rt pixels log Sal = log ω̌_lef (σ = 1), or, with ``accumulated``, lef_scale·L of the
+    multi-frame LEF in memory[ms] (:func:`accumulate_lef`), listed per row (row_x, row_logw) in
+    increasing x, with each pixel's log ω̌_lef (Eq. 28) in row_lef (for ICEF's MSW, Eq. 40)."""
     threshold = stats[0]
     i_min = ti.cast(stats[1], ti.f32)
     i_max = ti.cast(stats[2], ti.f32)
@@ -341,13 +346,42 @@ def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.templat
             keep = (ti.cast(acc2[0, y, xb], ti.f64) > threshold) & (acc[s, y, xb] == acc_max[s, y, xb]) & \
                 (valid[xb] > 0)
             if keep.any():
-                lw = lef_log_weight(correlate_d(z, s, d, y, xb), a, i_min, i_max)
+                lef = lef_log_weight(correlate_d(z, s, d, y, xb), a, i_min, i_max)
+                lw = lef
+                if ti.static(accumulated):
+                    lw = lef_scale * memory[ms, y, xb]
                 for k in ti.static(range(LANES)):
                     if keep[k]:
                         row_x[y, n] = xb * LANES + k
                         row_logw[y, n] = lw[k]
+                        row_lef[y, n] = lef[k]
                         n += 1
         n_row[y] = n
+
+
+@ti.kernel
+def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
+                   valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
+                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+    """Multi-frame LEF (not in the paper; a dynamic-programming accumulation of Eq. 27):
+    memory[dst] = log ω̌⁺(z[zs]) + γ·max_{(2r+1)²} memory[src], γ = ``memory_decay``, where
+    log ω̌⁺ = max over I ≥ 0 of −A·I² + B·I (Eqs. 27–28 without the Eq. 26 bounds: (z⋆D)²/(4A)
+    where z⋆D > 0, else 0).  The max filter lets the best path move ≤ r px per frame, so a
+    target's evidence adds up along its track over about 1/(1 − γ) frames, while noise peaks
+    do not line up.  The max filter is streamed like :func:`accumulate_max`; padding lanes 0."""
+    h = memory.shape[1]
+    ti.loop_config(serialize=serial)
+    for c in range(n_chunks):
+        y0, y1 = chunk_rows(c, n_chunks, h)
+        for y in range(y0 - r, y1 + r):
+            if 0 <= y < h:
+                row_max(memory, src, y, ring, c, y % (2 * r + 1), valid, r)
+            yc = y - r
+            if y0 <= yc < y1:
+                column_max(ring, c, yc, h, memory, dst, valid, r)
+                for xb in range(memory.shape[2]):
+                    lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
+                    memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
 
 
 @ti.func
@@ -381,20 +415,38 @@ def kth_largest(values: ti.template(), scratch: ti.template(), off: ti.i32, n: t
     return scratch[target]
 
 
+@ti.func
+def insert_best(best: ti.template(), value: ti.f32, pixel: ti.i32):
+    """Insert (value, pixel) into the descending list best[:, 0] if it beats the last entry (a later
+    equal value goes after the earlier one)."""
+    k = best.shape[0]
+    v = ti.cast(value, ti.f64)
+    if v > best[k - 1, 0]:
+        i = k - 1
+        while i > 0 and best[i - 1, 0] < v:
+            best[i, 0] = best[i - 1, 0]
+            best[i, 1] = best[i - 1, 1]
+            i -= 1
+        best[i, 0] = v
+        best[i, 1] = ti.cast(pixel, ti.f64)
+
+
 @ti.kernel
 def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
                    col_block: ti.template(),
                    block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
                    entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
                    scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
-                   written: ti.template(), n_written: ti.template()):
+                   written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
     """Eqs. 29–33 for every block in one serial launch (blocks are few and I_rt pixels sparse).
 
     The I_rt pixels are first gathered from the row lists into per-block slabs.  Sal = exp(log Sal − block max); N_eff = (Σ Sal)²/Σ Sal² in f64 (Eq. 30); T_ep is the
     k-th largest log Sal, k = clamp(round(N_eff), 1, nnz) (Eq. 31); pixels with
     log Sal ≥ T_ep keep Sal / Σ kept Sal (Eqs. 32–33).  The previous frame's proposal
     pixels are cleared first; block_stats[b] = (N_eff, k, nnz, Σ kept Sal).  The block
-    accumulators are reset for the next frame.
+    accumulators are reset for the next frame.  best[i] = (log ω̌_lef, pixel y·W + x) of the I_rt
+    pixels with the K = best.shape[0] largest log ω̌_lef, descending (ties in row-major order; NEG_INF
+    and −1 where there are fewer).
     """
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -403,6 +455,9 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
             proposal[p // proposal.shape[1], p % proposal.shape[1]] = 0.0
         n_written[None] = 0
         w = proposal.shape[1]
+        for i in range(best.shape[0]):
+            best[i, 0] = NEG_INF
+            best[i, 1] = -1.0
         for y in range(n_row.shape[0]):  # gather the I_rt pixels into block slabs, rows in order
             for i in range(n_row[y]):
                 x = row_x[y, i]
@@ -413,6 +468,7 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
                 entry_pixel[e] = y * w + x
                 entry_logw[e] = lw
                 block_nnz[b] += 1
+                insert_best(best, row_lef[y, i], y * w + x)
         for b in range(block_nnz.shape[0]):
             n = block_nnz[b]
             off = block_offset[b]

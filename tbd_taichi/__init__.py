@@ -15,7 +15,7 @@ from . import io, metrics, normalize, tables
 from .backend import available_archs, init, keep_freed_memory
 from .errors import BackendError, InputError, ParameterError, TBDError
 from .normalize import normalise_frame
-from .params import SGDSParams
+from .params import PAPER_SALIENCY, SGDSParams
 from .pf import OriginalPF
 from .sgds import SGDSPF, track
 from .simulate import Scenario, simulate
@@ -23,7 +23,7 @@ from .simulate import Scenario, simulate
 __version__ = "0.1.0"
 
 __all__ = [
-    "BackendError", "InputError", "OriginalPF", "ParameterError", "SGDSPF", "SGDSParams", "Scenario", "TBDError",
+    "BackendError", "InputError", "OriginalPF", "PAPER_SALIENCY", "ParameterError", "SGDSPF", "SGDSParams", "Scenario", "TBDError",
     "available_archs", "init", "keep_freed_memory", "track",
     "io", "metrics", "normalise_frame", "normalize", "simulate", "tables", "__version__",
 ]

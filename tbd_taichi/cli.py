@@ -11,7 +11,7 @@ import numpy as np
 from . import backend, metrics, tables
 from .background import BACKGROUNDS, DEFAULT_BACKGROUND, REAL_VIDEO
 from .errors import TBDError
-from .params import SGDSParams
+from .params import PAPER_SALIENCY, SGDSParams
 from .progress import progress_bar
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
@@ -90,6 +90,10 @@ def cmd_track(args) -> int:
         if args.method != "sgds":
             raise TBDError("--frontend-process applies to --method sgds only")
         method_only["frontend_process"] = True
+    if args.paper_saliency:
+        if args.method != "sgds":
+            raise TBDError("--paper-saliency applies to --method sgds only")
+        method_only.update(PAPER_SALIENCY)
     tracker = make_tracker(args.method, source.shape, seed=args.seed, engine=args.engine,
                            bad_pixels=not args.no_bad_pixels, **chosen, **method_only)
     out = Path(args.out)
@@ -255,6 +259,9 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--progress", action="store_true", help="show a progress bar")
     tr.add_argument("--frontend-process", action="store_true",
                     help="(sgds) " + FRONTEND_PROCESS_HELP)
+    tr.add_argument("--paper-saliency", action="store_true",
+                    help="(sgds) the paper's Eq. 29 weight (single-frame LEF) and Eq. 40's MSW (the searching particles' "
+                         "largest weight) instead of the multi-frame LEF and the candidates' best LEF")
     _common(tr)
     tr.set_defaults(func=cmd_track)
 

@@ -42,26 +42,29 @@ KEY_VARIABLE = "TBD_TAICHI_FRONT_END_KEY"  # the channel's authentication key, h
 
 @dataclass
 class FrontFrame:
-    """Frame ``frame``: normalised image z (H, W, σ units) and proposal map OPsal_N (Eq. 33)."""
+    """Frame ``frame``: normalised image z (H, W, σ units), proposal map OPsal_N (Eq. 33) and the
+    Eq. 24 candidates with the largest log ω̌_lef (Eq. 28), ``best_lef`` (K, 2): (value, pixel y·W + x)
+    descending, (−3e38, −1) past the last candidate."""
 
     frame: int
     z: np.ndarray
     proposal: np.ndarray
+    best_lef: np.ndarray
 
 
 class FrontEnd:
-    """Normalisation and saliency in this process (SGDS-PF parameters snr, L_ib, psf_sigma; the
-    ``Preprocessor``'s background and bad_pixels; engine "taichi" or "numpy")."""
+    """Normalisation and saliency in this process (SGDS-PF parameters snr, L_ib, psf_sigma, lef_memory,
+    lef_scale; the ``Preprocessor``'s background and bad_pixels; engine "taichi" or "numpy")."""
 
     def __init__(self, shape, snr: float, L_ib: int, psf_sigma: float, background: str, bad_pixels: bool,
-                 engine: str):
+                 engine: str, lef_memory: float = 0.0, lef_scale: float = 1.0):
         from .background import Preprocessor
         from .saliency import SaliencyExtractor
 
         self.shape = (int(shape[0]), int(shape[1]))
         self.preprocess = Preprocessor(self.shape, background, bad_pixels, engine)
         self.saliency = SaliencyExtractor(self.shape, snr=snr, block_size=L_ib, psf_sigma=psf_sigma,
-                                          engine=engine, details=False)
+                                          engine=engine, details=False, lef_memory=lef_memory, lef_scale=lef_scale)
         self.grid = self.saliency.grid
         self.frames_in = 0
         self.last_z: np.ndarray | None = None  # z of the last frame pushed
@@ -76,17 +79,17 @@ class FrontEnd:
         self.frames_in += 1
         t1 = time.perf_counter()
         self.stage_seconds["normalise"] += t1 - t0
-        done = [self._front_frame(s.frame) for s in self.saliency.push(z)]
+        done = [self._front_frame(s) for s in self.saliency.push(z)]
         self.stage_seconds["saliency"] += time.perf_counter() - t1
         return done
 
     def finish(self) -> list[FrontFrame]:
         """The last (up to) two frames."""
-        return [self._front_frame(s.frame) for s in self.saliency.emit_remaining()]
+        return [self._front_frame(s) for s in self.saliency.emit_remaining()]
 
-    def _front_frame(self, f: int) -> FrontFrame:
-        """Frame f right after the saliency stage emitted it (the next emission overwrites its proposal)."""
-        return FrontFrame(f, self._z.pop(f), backend.to_host(self.saliency.engine.proposal))
+    def _front_frame(self, s) -> FrontFrame:
+        """Frame s.frame right after the saliency stage emitted it (the next emission overwrites its proposal)."""
+        return FrontFrame(s.frame, self._z.pop(s.frame), backend.to_host(self.saliency.engine.proposal), s.best_lef)
 
     def close(self) -> None:
         """Nothing to release (see :meth:`FrontEndProcess.close`)."""
@@ -116,9 +119,9 @@ def _serve(conn) -> None:
                 slots["z"][t % 2] = front.last_z
                 for f in done:
                     slots["proposal"][t % 2] = f.proposal
-                answer = [f.frame for f in done]
+                answer = [(f.frame, f.best_lef) for f in done]
             else:  # the last frames: few, through the pipe
-                answer = [(f.frame, f.proposal) for f in front.finish()]
+                answer = [(f.frame, f.proposal, f.best_lef) for f in front.finish()]
         except Exception as exc:  # noqa: BLE001
             conn.send(("error", f"{type(exc).__name__}: {exc}"))
             continue
@@ -205,7 +208,7 @@ class FrontEndProcess:
         self._send("finish", None)
         answer = self._answer()
         self.stage_seconds.update(answer[1])
-        return done + [FrontFrame(f, self._z.pop(f), proposal) for f, proposal in answer[0]]
+        return done + [FrontFrame(f, self._z.pop(f), proposal, best) for f, proposal, best in answer[0]]
 
     def _send(self, kind: str, t) -> None:
         try:
@@ -240,7 +243,7 @@ class FrontEndProcess:
         frames, seconds = self._answer()
         self.stage_seconds.update(seconds)
         self._z[t] = self._slots["z"][t % 2].copy()
-        return [FrontFrame(f, self._z.pop(f), self._slots["proposal"][t % 2].copy()) for f in frames]
+        return [FrontFrame(f, self._z.pop(f), self._slots["proposal"][t % 2].copy(), best) for f, best in frames]
 
     def close(self) -> None:
         """Stop the child and free the shared memory (also done when the object is collected)."""

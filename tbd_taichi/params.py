@@ -13,6 +13,8 @@ from dataclasses import asdict, dataclass, fields, replace
 from .errors import ParameterError
 
 ICEF_REFERENCE_PIXELS = 200 * 200  # frame area at which icef_mean_ratio was chosen
+PAPER_SALIENCY = dict(lef_memory=0.0, msw_reference="search")  # Eq. 29 and Eq. 40's MSW as printed
+MSW_REFERENCES = ("candidates", "search")  # ICEF's MSW (Eq. 40): the frame's best LEF, or the searching PFs' best weight
 SNR_BANDS = (2.0, 1.8, 1.6, 1.4)  # lower edges of Table 2's columns [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6); then (0,1.4)
 
 # Table 2 point values per band: L_ib (px), N_sump^b, T_PE, T_PTp, T_ft, T_rt
@@ -70,6 +72,16 @@ class SGDSParams:
     icef_window: int = 10
     icef_mean_ratio: float = 0.05
     icef_area_exponent: float = 0.45
+    # not in the paper: Eq. 29's weight from the multi-frame LEF, lef_scale·L with
+    # L(f) = log ω̌⁺(f) + lef_memory·max3×3 L(f − 1) (a velocity-free dynamic-programming sum over about
+    # 1/(1 − lef_memory) frames); lef_memory = 0 is Eq. 29 as printed.  At SNR 1.2 it puts about 10×
+    # more of the proposal on the target (docs/results/suite_analysis.md)
+    lef_memory: float = 0.9
+    lef_scale: float = 0.5
+    # ICEF's MSW (Eq. 40): "candidates" = the frame's largest Eq. 28 LEF over Eq. 24's candidates, plus
+    # MSW_LEF_OFFSET; "search" = the largest searching-particle weight, as printed.  The printed MSW
+    # falls when the multi-frame LEF concentrates the searching particles, and noise tracks pass ICEF
+    msw_reference: str = "candidates"
 
     @classmethod
     def for_snr(cls, snr: float = 1.4, **overrides) -> "SGDSParams":
@@ -109,6 +121,8 @@ class SGDSParams:
             ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
             ("icef_mean_ratio", 0 < self.icef_mean_ratio <= 1, "in (0, 1]"),
             ("icef_area_exponent", self.icef_area_exponent >= 0, "≥ 0"),
+            ("lef_memory", 0 <= self.lef_memory < 1, "in [0, 1)"), ("lef_scale", self.lef_scale > 0, "> 0"),
+            ("msw_reference", self.msw_reference in MSW_REFERENCES, f"one of {', '.join(MSW_REFERENCES)}"),
         ]
         for name, ok, rule in checks:
             if not ok:

@@ -34,6 +34,7 @@ from .io import stream_frame
 from .numpy_kernels import saliency as nps
 
 ENGINES = ("taichi", "numpy")
+BEST_K = 32  # candidates with the largest Eq. 28 LEF reported per frame (ICEF's MSW skips those at tracks)
 
 
 @dataclass
@@ -105,14 +106,19 @@ class SaliencyFrame:
     n_eff: np.ndarray | None = None  # (B,) Eq. 30
     k: np.ndarray | None = None  # (B,) rank of T_ep (Eq. 31)
     nnz: np.ndarray | None = None  # (B,) candidate pixels per block
+    best_lef: np.ndarray | None = None  # (BEST_K, 2): the largest log ω̌_lef (Eq. 28) over I_rt pixels and their
+    # pixel indices y·W + x, descending; (−3e38, −1) rows where there are fewer candidates
 
 
 class NumpySaliencyEngine:
     """Ring buffers as NumPy arrays; every step is a call of the NumPy twin."""
 
-    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
+    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int, lef_memory: float = 0.0,
+                 lef_scale: float = 1.0):
         self.grid, self.d, self.r = grid, d, window
+        self.lef_memory, self.lef_scale = lef_memory, lef_scale
         self.ring = {name: np.zeros((3,) + tuple(shape), np.float32) for name in ("z", "se_max", "acc", "acc_max")}
+        self.memory = np.zeros(shape, np.float32)  # the multi-frame LEF of the last frame emitted
         self.proposal = np.zeros(shape, np.float32)  # the latest frame's OPsal_N, as the Taichi engine keeps it
 
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
@@ -127,18 +133,22 @@ class NumpySaliencyEngine:
         self.ring["acc_max"][dst] = nps.max_filter(total, self.r)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
-        """I_acc2, Eqs. 23–24 and 26–33 for the frame in ``slot``."""
+        """I_acc2, Eqs. 23–24 and 26–33 for the frame in ``slot`` (and the multi-frame LEF)."""
         acc2 = nps.sum_frames(*[self.ring["acc_max"][s] if s >= 0 else None for s in slots], scale)
         count = acc2.size
         threshold = segmentation_threshold(*moments_to_mean_std(nps.row_moments(acc2), count), snr)
         z = self.ring["z"][slot]
         i_min, i_max = intensity_range(*moments_to_mean_std(nps.row_moments(z), count), snr)
         mask = nps.segment(acc2, threshold, self.ring["acc"][slot], self.ring["acc_max"][slot])
-        logw = nps.lef_map(z, self.d, 1.0, a, i_min, i_max)
+        lef = nps.lef_map(z, self.d, 1.0, a, i_min, i_max)
+        logw = lef
+        if self.lef_memory > 0:
+            self.memory = nps.accumulate_lef(self.memory, z, self.d, a, self.lef_memory, self.r)
+            logw = (np.float32(self.lef_scale) * self.memory).astype(np.float32)
         out = nps.block_proposal(mask, logw, self.grid.block_id, self.grid.n_blocks)
         self.proposal = out["proposal"]
-        out.update(mask=mask, threshold=threshold, i_range=(i_min, i_max))
-        return out if details else {}
+        out.update(mask=mask, threshold=threshold, i_range=(i_min, i_max), best_lef=nps.best_lef(mask, lef, BEST_K))
+        return out if details else {"best_lef": out["best_lef"]}
 
 
 CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
@@ -181,10 +191,13 @@ class TaichiSaliencyEngine:
     """Ring buffers as Taichi fields of 8-lane vectors; each step is one kernel launch for the
     whole image or for all blocks."""
 
-    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int):
+    def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int, lef_memory: float = 0.0,
+                 lef_scale: float = 1.0):
         from .kernels import saliency as ks
 
         self.ks, self.grid, self.r = ks, grid, window
+        self.lef_memory, self.lef_scale = lef_memory, lef_scale
+        self.memory_slot = 0  # slot of memory holding the last emitted frame's multi-frame LEF
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_lanes, valid = lane_layout(self.shape[1])
         self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
@@ -200,6 +213,7 @@ class TaichiSaliencyEngine:
         f.block_max.fill(ks.NEG_INF)
         f.proposal.fill(0)
         f.n_written.fill(0)
+        f.memory.fill(0)
         self.host_lanes = np.zeros((self.shape[0], self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
 
     def _fields(self):
@@ -219,6 +233,9 @@ class TaichiSaliencyEngine:
         f.acc2_rows = ti.field(ti.f64, shape=(1, h, 2))
         f.row_x = ti.field(ti.i32, shape=(h, w))
         f.row_logw = ti.field(ti.f32, shape=(h, w))
+        f.row_lef = ti.field(ti.f32, shape=(h, w))
+        f.best = ti.field(ti.f64, shape=(BEST_K, 2))
+        f.memory = image(2)  # multi-frame LEF, two slots used in turn
         f.n_row = ti.field(ti.i32, shape=h)
         f.stats = ti.field(ti.f64, shape=8)
         f.d = ti.field(ti.f32, shape=(5, 5))
@@ -247,23 +264,30 @@ class TaichiSaliencyEngine:
                                self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
-        ks = self.ks
-        ks.accumulate_moments(self.f.ring["acc_max"], *slots, scale, self.f.acc2, self.f.acc2_rows, self.serial)
-        ks.frame_statistics(self.f.acc2_rows, self.f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), self.f.stats)
-        ks.segment_and_lef(self.f.acc2, self.f.ring["acc"], self.f.ring["acc_max"], slot, self.f.ring["z"], self.f.valid, self.f.d,
-                           a, self.f.stats, self.f.row_x, self.f.row_logw, self.f.n_row, self.serial)
-        ks.block_proposal(self.f.row_x, self.f.row_logw, self.f.n_row, self.f.row_base, self.f.col_block, self.f.block_offset, self.f.block_nnz,
-                          self.f.block_max, self.f.entry_pixel, self.f.entry_logw, self.f.entry_sal, self.f.scratch,
-                          self.f.block_stats, self.f.proposal, self.f.written, self.f.n_written)
+        ks, f = self.ks, self.f
+        ks.accumulate_moments(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, self.serial)
+        ks.frame_statistics(f.acc2_rows, f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), f.stats)
+        accumulated = self.lef_memory > 0
+        if accumulated:
+            src, self.memory_slot = self.memory_slot, 1 - self.memory_slot
+            ks.accumulate_lef(f.ring["z"], slot, f.d, a, self.lef_memory, f.valid, f.memory, src, self.memory_slot,
+                              f.ring_max, self.n_chunks, self.r, self.serial)
+        ks.segment_and_lef(f.acc2, f.ring["acc"], f.ring["acc_max"], slot, f.ring["z"], f.valid, f.d, a, f.stats,
+                           f.memory, self.memory_slot, self.lef_scale, accumulated,
+                           f.row_x, f.row_logw, f.row_lef, f.n_row, self.serial)
+        ks.block_proposal(f.row_x, f.row_logw, f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz,
+                          f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch,
+                          f.block_stats, f.proposal, f.written, f.n_written, f.row_lef, f.best)
+        best = backend.to_host(f.best)
         if not details:
-            return {}
-        stats, blocks = backend.to_host(self.f.stats), backend.to_host(self.f.block_stats)
+            return {"best_lef": best}
+        stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)
         nnz = blocks[:, 2].astype(np.int64)
         entries = backend.to_host(self.f.entry_pixel)
         mask = np.zeros(self.shape, bool)
         for off, n in zip(self.grid.offsets, nnz):
             mask.ravel()[entries[off:off + n]] = True
-        return {"proposal": backend.to_host(self.f.proposal), "mask": mask,
+        return {"proposal": backend.to_host(self.f.proposal), "mask": mask, "best_lef": best,
                 "threshold": float(stats[0]), "i_range": (float(stats[1]), float(stats[2])),
                 "n_eff": blocks[:, 0], "k": blocks[:, 1].astype(np.int64), "nnz": nnz}
 
@@ -273,27 +297,35 @@ class SaliencyExtractor:
 
     ``snr`` is the lowest SNR to detect (Eqs. 23 and 26); ``block_size`` is L_ib (px);
     ``psf_sigma`` is Σ (px) of D (Eq. 25); ``window`` the radius of the 3×3 operators.
-    ``details=False`` copies nothing back to the host: the proposal stays in the engine
-    (the tracker's path), and the returned frames carry only their index.
+    ``details=False`` copies nothing but ``best_lef`` back to the host: the proposal stays in the
+    engine (the tracker's path), and the returned frames carry only their index and ``best_lef``.
+
+    ``lef_memory`` γ > 0 replaces Eq. 29's weight log ω̌_lef by ``lef_scale``·L, the multi-frame
+    LEF L(f) = log ω̌⁺(f) + γ·max3×3 L(f − 1) (not in the paper; ``accumulate_lef`` in the
+    kernels): a target moving ≤ 1 px/frame adds its evidence up over about 1/(1 − γ) frames.
+    γ = 0 (the default here) is Eq. 29 as printed.
     """
 
     def __init__(self, shape, snr: float = 1.4, block_size: int = 150, psf_sigma: float = 0.7,
-                 engine: str = "taichi", window: int = 1, arch: str | None = None, details: bool = True):
+                 engine: str = "taichi", window: int = 1, arch: str | None = None, details: bool = True,
+                 lef_memory: float = 0.0, lef_scale: float = 1.0):
         if engine not in ENGINES:
             raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
         if len(shape) != 2 or min(shape) < 1:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape}")
         if snr <= 0 or psf_sigma <= 0 or window < 1:
             raise ParameterError("snr and psf_sigma must be > 0 and window ≥ 1")
+        if not 0 <= lef_memory < 1 or not lef_scale > 0:
+            raise ParameterError(f"lef_memory must be in [0, 1) and lef_scale > 0, got {lef_memory!r}, {lef_scale!r}")
         self.shape, self.snr = (int(shape[0]), int(shape[1])), float(snr)
         self.grid = block_grid(self.shape, block_size)
         d = psf_matrix(psf_sigma)
         self.a = float((d.astype(np.float64) ** 2).sum() / 2.0)  # A = ΣD²/(2σ²), σ = 1 (Eq. 27)
         if engine == "taichi":
             backend.ensure_init(arch)
-            self.engine = TaichiSaliencyEngine(self.shape, self.grid, d, window)
+            self.engine = TaichiSaliencyEngine(self.shape, self.grid, d, window, lef_memory, lef_scale)
         else:
-            self.engine = NumpySaliencyEngine(self.shape, self.grid, d, window)
+            self.engine = NumpySaliencyEngine(self.shape, self.grid, d, window, lef_memory, lef_scale)
         self.details = details
         self.n_pushed = 0
         self.n_emitted = 0
@@ -312,7 +344,7 @@ class SaliencyExtractor:
         out = self.engine.second_layer_and_blocks(slots, scale, f % 3, self.snr, self.a, self.details)
         self.n_emitted = f + 1
         return SaliencyFrame(f, out.get("proposal"), out.get("threshold"), out.get("i_range"), out.get("mask"),
-                             out.get("n_eff"), out.get("k"), out.get("nnz"))
+                             out.get("n_eff"), out.get("k"), out.get("nnz"), out["best_lef"])
 
     def push(self, z) -> list[SaliencyFrame]:
         """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""

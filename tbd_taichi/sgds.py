@@ -50,6 +50,7 @@ MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
+MSW_LEF_OFFSET = 0.3  # ln MSW − the frame's best candidate LEF, measured with the printed MSW (msw_from_candidates)
 PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight on the newest frame
 
 
@@ -78,6 +79,31 @@ def peak_z(z: np.ndarray, x: float, y: float) -> float:
     cx, cy = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
     window = z[max(cy - 1, 0):max(cy + 2, 0), max(cx - 1, 0):max(cx + 2, 0)]
     return float(window.max()) if window.size else float("nan")
+
+
+def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> float:
+    """ln MSW for Eq. 40 from the frame's Eq. 24 candidates with the largest log ω̌_lef (Eq. 28)
+    (``best_lef`` rows (value, pixel y·W + x), descending; not in the paper): the first one outside
+    the squares of ±DUPLICATE_RADIUS px around the ``tracked`` (x, y) points, plus MSW_LEF_OFFSET;
+    the last row's value if every row is tracked; −3e38 (no search evidence: ICEF = 1) without
+    candidates.
+
+    The printed MSW, the searching particles' largest weight, is about the same extreme of the
+    noise (measured on the simulator, SNR 1.2 and 2.0 presets at 200×200: ln MSW − the best candidate's
+    LEF = 0.29 on average) as long as the proposal spreads the particles over the candidates; this one
+    does not depend on where the particles are, so it holds when the multi-frame LEF concentrates them.
+    Like the searching particles (saliency is masked at tracks, Eq. 36's PPs are handed over), it
+    leaves out what is tracked already, so a bright tracked object does not hold other tracks down."""
+    valid = best_lef[:, 0] > -1e37
+    if not valid.any():
+        return -3.0e38
+    values, pixels = best_lef[valid, 0], best_lef[valid, 1].astype(np.int64)
+    free = np.ones(len(values), bool)
+    r = math.ceil(DUPLICATE_RADIUS)
+    for x, y in tracked:
+        cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
+        free &= (np.abs(pixels % width - cx) > r) | (np.abs(pixels // width - cy) > r)
+    return float(values[np.argmax(free)] if free.any() else values[-1]) + MSW_LEF_OFFSET
 
 
 def icef_of_log_ratio(log_r: float) -> float:
@@ -210,7 +236,7 @@ class SGDSPF:
         p = self.p
         front = FrontEndProcess if frontend_process else FrontEnd
         self.front = front(self.shape, snr=p.snr, L_ib=p.L_ib, psf_sigma=p.psf_sigma, background=background,
-                           bad_pixels=bad_pixels, engine=engine)
+                           bad_pixels=bad_pixels, engine=engine, lef_memory=p.lef_memory, lef_scale=p.lef_scale)
         self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
         self.search = ParticlePool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
@@ -285,7 +311,7 @@ class SGDSPF:
     def _process(self, front: FrontFrame) -> list[tuple]:
         f, z = front.frame, front.z
         t0 = time.perf_counter()
-        log_msw = self._search_step(f, z, front.proposal)
+        log_msw = self._search_step(f, z, front)
         t0 = self._clock("searching", t0)
         rows = self._track_step(f, z, log_msw)
         self._clock("tracking", t0)
@@ -314,9 +340,10 @@ class SGDSPF:
         labels[old] = self.pp_index[old]
         return labels
 
-    def _search_step(self, f: int, z: np.ndarray, proposal: np.ndarray) -> float:
+    def _search_step(self, f: int, z: np.ndarray, front: FrontFrame) -> float:
+        """Algorithm 1 on frame f; returns ln MSW for Eq. 40 (``msw_reference``)."""
         p, pool, grid = self.p, self.search, self.grid
-        proposal = self._suppress_tracked(proposal)
+        proposal = self._suppress_tracked(front.proposal)
         support = proposal > 0
         pix = np.flatnonzero(support)
         blocks = grid.block_id.ravel()[pix]
@@ -327,7 +354,10 @@ class SGDSPF:
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
         pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts))
-        log_msw = float(pool.max_log_weights().max())
+        if p.msw_reference == "search":
+            log_msw = float(pool.max_log_weights().max())
+        else:
+            log_msw = msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
         self._eliminate_and_hand_over(f)
         return log_msw
 

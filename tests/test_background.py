@@ -205,8 +205,9 @@ def test_bad_arguments():
 def test_real_clip_regression():
     """First 60 frames of the real clip IR_DRONE_021 (CC0, tests/data).  With the real-video settings
     (spatiotemporal background, snr 5, min_peak_z 15) the drone is confirmed and held with almost no false points;
-    spatial suppression alone holds it but confirms still clutter too; without suppression (the
-    paper's "none") clutter wins."""
+    spatial suppression alone finds it late and confirms still clutter too (with the paper's Eq. 29 and MSW it
+    held it, 0.78, but with 2.1 false points per frame); without suppression (the paper's "none") nothing near it
+    is confirmed."""
     from pathlib import Path
 
     from tbd_taichi import io, metrics, tables
@@ -222,8 +223,8 @@ def test_real_clip_regression():
         online = [row for frame in frames for row in tracker.update(frame)]
         tracker.finish()
         scores[name] = metrics.box_scores(tables.make_table(online, tables.TRACK_DTYPE), boxes, 60)
-    # measured: real 0.68 / 0.02 false points / confirmed at frame 17; spatial 0.78 / 2.1 / 11; none 0.0 / 8.8
+    # measured: real 0.68 / 0.00 false points / confirmed at frame 17; spatial 0.25 / 0.33 / 43; none 0.0 / 0.0
     assert scores["real"]["detection_rate"] > 0.6 and scores["real"]["first_confirmation"] <= 25, scores
-    assert scores["real"]["false_points"] < 0.3, scores
-    assert scores["spatial"]["detection_rate"] > 0.7 and scores["spatial"]["false_points"] > 1.0, scores
+    assert scores["real"]["false_points"] < 0.1, scores
+    assert scores["spatial"]["detection_rate"] < 0.5 and scores["spatial"]["false_points"] > 0.1, scores
     assert scores["none"]["detection_rate"] < 0.2, scores

@@ -103,3 +103,19 @@ def test_track_real_video_preset_and_overrides(tmp_path, capsys):
     assert np.mean(inside) > 0.9
     assert cli.main(["track", str(tmp_path / "clip.npy"), "--real-video", "--min-peak-z", "500", "--out", str(out)]) == 0
     assert len(tables.read_tracks(out)) == 0  # the drone's peak z is far below 500
+
+
+def test_track_paper_saliency_matches_the_api(tmp_path):
+    """--paper-saliency gives the API's SGDSPF(..., **PAPER_SALIENCY) rows; with --method pf it is an error."""
+    import tbd_taichi as tbd
+
+    scene = tbd.simulate((48, 48), 30, 2.5, seed=4)
+    np.save(tmp_path / "seq.npy", scene.frames)
+    out = tmp_path / "t.csv"
+    assert cli.main(["track", str(tmp_path / "seq.npy"), "--paper-saliency", "--out", str(out)]) == 0
+    expected = tbd.track(scene.frames, method="sgds", **tbd.PAPER_SALIENCY)
+    got = tables.read_tracks(out)
+    assert len(got) == len(expected) > 0
+    np.testing.assert_allclose(got["x"], expected["x"], atol=1e-4)
+    res = run_cli("track", tmp_path / "seq.npy", "--method", "pf", "--paper-saliency", "--out", out)
+    assert res.returncode == 2 and "--paper-saliency applies to --method sgds only" in res.stderr

@@ -2,7 +2,7 @@
 import pytest
 
 from tbd_taichi.errors import ParameterError
-from tbd_taichi.params import SGDSParams, snr_band
+from tbd_taichi.params import PAPER_SALIENCY, SGDSParams, snr_band
 
 
 @pytest.mark.parametrize("snr,band,l_ib,n_sump,t_pe,t_ptp,t_ft,t_rt", [
@@ -36,5 +36,13 @@ def test_overrides_and_their_validation():
         SGDSParams.for_snr(2.0, icef_mean_ratio=0.0)
     with pytest.raises(ParameterError, match="icef_area_exponent = -0.5 must be ≥ 0"):
         SGDSParams.for_snr(2.0, icef_area_exponent=-0.5)
+    with pytest.raises(ParameterError, match=r"lef_memory = 1.0 must be in \[0, 1\)"):
+        SGDSParams.for_snr(2.0, lef_memory=1.0)
+    with pytest.raises(ParameterError, match="lef_scale = 0 must be > 0"):
+        SGDSParams.for_snr(2.0, lef_scale=0)
+    with pytest.raises(ParameterError, match="msw_reference = 'tracks' must be one of candidates, search"):
+        SGDSParams.for_snr(2.0, msw_reference="tracks")
+    paper = SGDSParams.for_snr(1.4, **PAPER_SALIENCY)
+    assert paper.lef_memory == 0 and paper.msw_reference == "search"
     with pytest.raises(ParameterError, match="snr must be a number > 0"):
         SGDSParams.for_snr(-1)

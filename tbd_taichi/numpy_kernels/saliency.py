@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 F32 = np.float32
+NEG_INF = F32(-3.0e38)  # as the kernels' NEG_INF
+LEF_NO_CAP = 3.0e38  # as the kernels' LEF_NO_CAP
 
 
 def _window_sum_max(p: np.ndarray, r: int, axis: int):
@@ -85,6 +87,27 @@ def lef_log_weight(b: np.ndarray, a: float, i_min: float, i_max: float) -> np.nd
 def lef_map(z: np.ndarray, d: np.ndarray, inv_var: float, a: float, i_min: float, i_max: float) -> np.ndarray:
     """log ω̌_lef at every pixel (Eqs. 25–28)."""
     return lef_log_weight(correlate_d(z, d) * F32(inv_var), a, i_min, i_max)
+
+
+def accumulate_lef(memory: np.ndarray, z: np.ndarray, d: np.ndarray, a: float, memory_decay: float,
+                   r: int = 1) -> np.ndarray:
+    """Multi-frame LEF (not in the paper): log ω̌⁺(z) + γ·max_{(2r+1)²} memory, where log ω̌⁺ is
+    Eqs. 27–28 with the intensity bounds [0, ∞) (``memory`` is the previous frame's result, zeros
+    before the first frame)."""
+    lef = lef_log_weight(correlate_d(z, d), a, 0.0, LEF_NO_CAP)
+    return (lef + F32(memory_decay) * max_filter(memory, r)).astype(F32)
+
+
+def best_lef(mask: np.ndarray, lef: np.ndarray, k: int) -> np.ndarray:
+    """(k, 2) f64: (log ω̌_lef, pixel y·W + x) of the I_rt pixels with the k largest log ω̌_lef,
+    descending, ties in row-major order; (NEG_INF, −1) rows where there are fewer (NEG_INF as f32)."""
+    idx = np.flatnonzero(mask)
+    values = lef.ravel()[idx]
+    order = np.argsort(-values.astype(np.float64), kind="stable")[:k]
+    out = np.tile(np.array([NEG_INF, -1.0]), (k, 1))  # the kernel's fill: f32 −3e38
+    out[:len(order), 0] = values[order]
+    out[:len(order), 1] = idx[order]
+    return out
 
 
 def segment(acc2: np.ndarray, threshold: float, acc: np.ndarray, acc_max: np.ndarray) -> np.ndarray:
