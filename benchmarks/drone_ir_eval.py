@@ -118,7 +118,11 @@ def main() -> None:
               "| … snr 5, min_peak_z 15, running mean from 0 (chosen) | 0.83 | 0.81 | 0.051 |",
               "| … and the 10-frame ICEF window (`icef_window`, the tracker's default since) | 0.84 | 0.81 | 0.051 |",
               "| … with the window's threshold scaled to the frame area (0.036 at 320×256; default since) | 0.84 | 0.81 "
-              "| 0.051 |", "",
+              "| 0.051 |",
+              "| … the multi-frame LEF and ICEF's MSW from the candidates, tracked ones left in (a first version) | 0.83 "
+              "| 0.81 | 0.017 |",
+              "| … the multi-frame LEF and ICEF's MSW from the untracked candidates (`lef_memory` 0.9, `msw_reference` "
+              "candidates; default since) | 0.83 | 0.81 | 0.050 |", "",
               "With `spatial` alone, still point-like clutter (tree tops, dark sensor rows, compression texture) was "
               "confirmed. With the spatiotemporal background the confirmed clutter is fainter than the targets: "
               "over the snr-5 run's tracks, the largest z within 1 px of the estimate (median over a track's rows) is "
@@ -128,7 +132,11 @@ def main() -> None:
               "(`min_peak_z`, output only) was chosen; starting its running mean at 0 means a track must stay bright for "
               "about ten frames, which removed the short tracks on ground transients early in the clips. The false "
               "points left are mostly real unlabelled objects: a vehicle moving along the road in IR_DRONE_142 and "
-              "moving ground objects in IR_BIRD_016.", "",
+              "moving ground objects in IR_BIRD_016. The multi-frame LEF moved detection on two clips, IR_BIRD_016 "
+              "0.92 → 0.84 and IR_AIRPLANE_031 0.95 → 0.92 (first confirmation at frame 25 instead of 16). With "
+              "tracked candidates left in ICEF's MSW the vehicle was not confirmed, but only because a bright tracked "
+              "object then set MSW for every other track, which also held dim targets down (IR_DRONE_021 with "
+              "`background='spatial'`: detection 0.08 against 0.25).", "",
               f"![{args.gif}](drone_ir.gif)", ""]
     (out_dir / "drone_ir.md").write_text("\n".join(lines))
     print(f"-> {out_dir / 'drone_ir.md'}")

@@ -132,7 +132,7 @@ def test_msw_from_candidates_skips_tracked_candidates():
 @pytest.mark.slow
 def test_multi_frame_lef_finds_more_faint_targets_than_eq29():
     """200×200, SNR 1.2, scenario seeds 12–19.  Defaults (multi-frame LEF, MSW from the candidates):
-    measured DSR 0.35, 0.61, 0.73, 0.74, 0.89, 0.00, 0.31, 0.49 (7 found, mean 0.52, no false track);
+    measured DSR 0.35, 0.61, 0.73, 0.77, 0.89, 0.00, 0.31, 0.49 (7 found, mean 0.52, no false track);
     the paper's Eq. 29 and MSW: 0.00, 0.68, 0.59, 0.43, 0.54, 0.00, 0.00, 0.51 (5 found, mean 0.34, one
     false track).  Over the suite's 100 seeds: TSR 0.67 → 0.74, mean DSR 0.41 → 0.50 (docs/results/suite.md)."""
     results = {}
