@@ -205,9 +205,9 @@ def test_bad_arguments():
 def test_real_clip_regression():
     """First 60 frames of the real clip IR_DRONE_021 (CC0, tests/data).  With the real-video settings
     (spatiotemporal background, snr 5, min_peak_z 15) the drone is confirmed and held with almost no false points;
-    spatial suppression alone finds it late and confirms still clutter too (with the paper's Eq. 29 and MSW it
-    held it, 0.78, but with 2.1 false points per frame); without suppression (the paper's "none") nothing near it
-    is confirmed."""
+    spatial suppression alone finds it late, as bright untracked clutter sets ICEF's MSW from the candidates,
+    and confirms still clutter too (with the printed MSW it held it, 0.78, with 1.6 false points per frame);
+    without suppression (the paper's "none") nothing near it is confirmed."""
     from pathlib import Path
 
     from tbd_taichi import io, metrics, tables
