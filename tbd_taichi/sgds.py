@@ -22,7 +22,9 @@ intensity (×2πΣ²) like the original PF; PE = ΣE/N_pp (the fraction of the P
 with E = 1); SCEF uses dev_d = √((var_x + var_y)/2 + |cov_xy|) and SCEF = T_devr/max(dev)
 when spread (the printed √cov can be imaginary); ICEF is also 1 when MTW/MSW's geometric mean
 over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio``, scaled to the frame area
-(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); a track also ends when its estimate
+(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); Eq. 29's weight is the multi-frame
+LEF (``lef_memory``, ``lef_scale``) and Eq. 40's MSW the best untracked candidate's LEF (``msw_reference``,
+:func:`msw_from_candidates`), both not in the paper (``PAPER_SALIENCY`` restores them); a track also ends when its estimate
 leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
 active track is masked and a potential target within 2 px of a track is dropped, so one
 target gives one track; of two tracks closer than 2 px the younger one is removed.
