@@ -14,7 +14,7 @@ from .errors import ParameterError
 
 ICEF_REFERENCE_PIXELS = 200 * 200  # frame area at which icef_mean_ratio was chosen
 PAPER_SALIENCY = dict(lef_memory=0.0, msw_reference="search")  # Eq. 29 and Eq. 40's MSW as printed
-MSW_REFERENCES = ("candidates", "search")  # ICEF's MSW (Eq. 40): the frame's best LEF, or the searching PFs' best weight
+MSW_REFERENCES = ("candidates", "search")  # ICEF's MSW (Eq. 40): the best untracked candidate's LEF, or the searching PFs' best weight
 SNR_BANDS = (2.0, 1.8, 1.6, 1.4)  # lower edges of Table 2's columns [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6); then (0,1.4)
 
 # Table 2 point values per band: L_ib (px), N_sump^b, T_PE, T_PTp, T_ft, T_rt
@@ -74,12 +74,12 @@ class SGDSParams:
     icef_area_exponent: float = 0.45
     # not in the paper: Eq. 29's weight from the multi-frame LEF, lef_scale·L with
     # L(f) = log ω̌⁺(f) + lef_memory·max3×3 L(f − 1) (a velocity-free dynamic-programming sum over about
-    # 1/(1 − lef_memory) frames); lef_memory = 0 is Eq. 29 as printed.  At SNR 1.2 it puts about 10×
+    # 1/(1 − lef_memory) frames); lef_memory = 0 is Eq. 29 as printed.  At SNR 1.2 it puts about 8×
     # more of the proposal on the target (docs/results/suite_analysis.md)
     lef_memory: float = 0.9
     lef_scale: float = 0.5
-    # ICEF's MSW (Eq. 40): "candidates" = the frame's largest Eq. 28 LEF over Eq. 24's candidates, plus
-    # MSW_LEF_OFFSET; "search" = the largest searching-particle weight, as printed.  The printed MSW
+    # ICEF's MSW (Eq. 40): "candidates" = the largest Eq. 28 LEF over Eq. 24's candidates away from the active
+    # tracks, plus MSW_LEF_OFFSET (sgds.msw_from_candidates); "search" = the largest searching-particle weight, as printed.  The printed MSW
     # falls when the multi-frame LEF concentrates the searching particles, and noise tracks pass ICEF
     msw_reference: str = "candidates"
 

@@ -51,6 +51,7 @@ from .tables import TRACK_DTYPE, make_table
 MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
+TRACK_MASK_HALF = math.ceil(DUPLICATE_RADIUS)  # px: half-side of the square around a track kept out of the search
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
 MSW_LEF_OFFSET = 0.3  # ln MSW − the frame's best candidate LEF, measured with the printed MSW (msw_from_candidates)
 PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight on the newest frame
@@ -75,10 +76,15 @@ class Track:
         return self.path[-1][1], self.path[-1][2]
 
 
+def nearest_pixel(x: float, y: float) -> tuple[int, int]:
+    """The pixel (column, row) whose centre is nearest to (x, y) (centres at integers)."""
+    return int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+
+
 def peak_z(z: np.ndarray, x: float, y: float) -> float:
     """The largest z in the 3×3 pixels around (x, y) (σ units; NaN outside the image)."""
     h, w = z.shape
-    cx, cy = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+    cx, cy = nearest_pixel(x, y)
     window = z[max(cy - 1, 0):max(cy + 2, 0), max(cx - 1, 0):max(cx + 2, 0)]
     return float(window.max()) if window.size else float("nan")
 
@@ -86,7 +92,8 @@ def peak_z(z: np.ndarray, x: float, y: float) -> float:
 def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> float:
     """ln MSW for Eq. 40 from the frame's Eq. 24 candidates with the largest log ω̌_lef (Eq. 28)
     (``best_lef`` rows (value, pixel y·W + x), descending; not in the paper): the first one outside
-    the squares of ±DUPLICATE_RADIUS px around the ``tracked`` (x, y) points, plus MSW_LEF_OFFSET;
+    the squares of ±TRACK_MASK_HALF px around the ``tracked`` (x, y) points (the squares
+    ``SGDSPF._suppress_tracked`` keeps out of the proposal), plus MSW_LEF_OFFSET;
     the last row's value if every row is tracked; −3e38 (no search evidence: ICEF = 1) without
     candidates.
 
@@ -101,10 +108,9 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
         return -3.0e38
     values, pixels = best_lef[valid, 0], best_lef[valid, 1].astype(np.int64)
     free = np.ones(len(values), bool)
-    r = math.ceil(DUPLICATE_RADIUS)
     for x, y in tracked:
-        cx, cy = math.floor(x + 0.5), math.floor(y + 0.5)
-        free &= (np.abs(pixels % width - cx) > r) | (np.abs(pixels // width - cy) > r)
+        cx, cy = nearest_pixel(x, y)
+        free &= (np.abs(pixels % width - cx) > TRACK_MASK_HALF) | (np.abs(pixels // width - cy) > TRACK_MASK_HALF)
     return float(values[np.argmax(free)] if free.any() else values[-1]) + MSW_LEF_OFFSET
 
 
@@ -322,14 +328,13 @@ class SGDSPF:
         return rows
 
     def _suppress_tracked(self, proposal: np.ndarray) -> np.ndarray:
-        """Zero the proposal within DUPLICATE_RADIUS of active tracks (one target, one track)."""
+        """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track)."""
         if not self.active:
             return proposal
         prop = proposal.copy()
-        r = int(math.ceil(DUPLICATE_RADIUS))
+        r = TRACK_MASK_HALF
         for t in self.active:
-            x, y = t.last_xy()
-            cx, cy = int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+            cx, cy = nearest_pixel(*t.last_xy())
             prop[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
         return prop
 
