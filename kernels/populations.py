@@ -114,11 +114,11 @@ class PopulationKernels:
 
     @ti.kernel
     def hand_over(self, b: ti.i32, drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
-                  index: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+                  index: ti.types.ndarray(dtype=ti.i32, ndim=2), counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
         """After :meth:`eliminate`: the particles of dropped PPs (drop[k] ≠ 0) go too; the index image
         P_pp (Eq. 36): each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the
         larger PP winning, then the later in state order; the kept particles move to the front of
-        their slabs."""
+        their slabs, and ``counts`` receives every group's new live count."""
         h, w = ti.static(self.label.shape[0], self.label.shape[1])
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
@@ -128,6 +128,9 @@ class PopulationKernels:
         if ti.static(not self.serial):  # the winners write their Seq
             self.for_states(self.write_winner, b, ti.static((drop, index)))
         self.compact(b, self.state_keep)
+        ti.loop_config(serialize=True)
+        for g in range(counts.shape[0]):
+            counts[g] = self.n[g]
 
     @ti.func
     def claim_pixel(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):

@@ -16,6 +16,7 @@ adds local (spatial) and temporal backgrounds with a local σ for cluttered vide
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -24,13 +25,24 @@ import numpy as np
 from .errors import ParameterError
 
 MAD_TO_SIGMA = 1.4826  # σ = 1.4826·MAD for Gaussian noise
-MAX_SAMPLES = 1 << 16  # robust statistics use at most this many pixels (a fixed stride)
+MAX_SAMPLES = 1 << 14  # robust statistics use at most this many pixels (a fixed stride); see stat_sample
 
 
 def stat_sample(frame: np.ndarray, max_samples: int = MAX_SAMPLES) -> np.ndarray:
-    """Flat float32 view of the frame, strided so it holds at most ``max_samples`` pixels."""
-    flat = np.asarray(frame, dtype=np.float32).reshape(-1)
+    """Flat float32 view of the frame, strided so it holds at most ``max_samples`` pixels.
+
+    The stride is the smallest one that is small enough and shares no factor with the width W, so
+    the samples visit every column (a stride that divides W would see only some columns, and
+    alias column-periodic fixed-pattern noise).  With 2¹⁴ samples of Gaussian noise the median's
+    standard error is 1.2533σ/√n ≈ 0.01σ and the MAD's about 0.9 % of σ, well below what moves a
+    detection; two medians of 2¹⁴ values cost about 0.3 ms, of 41,000 (all even columns of a
+    320×256 frame) 0.9 ms."""
+    frame = np.asarray(frame, dtype=np.float32)
+    flat = frame.reshape(-1)
+    width = frame.shape[-1] if frame.ndim else 1
     stride = max(1, -(-flat.size // max_samples))
+    while stride > 1 and math.gcd(stride, width) != 1:
+        stride += 1
     return flat[::stride]
 
 

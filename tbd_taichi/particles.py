@@ -116,7 +116,7 @@ class ParticlePool:
         self.k.set_counts(self.counts)
         self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
         self._z = np.zeros(self.frame_shape, np.float32)  # the normalised frame weigh reads
-        self._eliminated = None  # (pp, populations, keep) of the last eliminate, until its hand_over
+        self._eliminated = None  # (particles, populations) of the last eliminate, until its hand_over
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
@@ -283,8 +283,9 @@ class ParticlePool:
     def states_at(self, index) -> dict:
         """Like :meth:`state`, for the live particles at positions ``index`` of the state order."""
         index = np.asarray(index, dtype=np.int64).reshape(-1)
-        group = np.repeat(np.arange(self.n_groups), self.counts)[index]
-        slots = (self.off[group] + index - (np.cumsum(self.counts) - self.counts)[group]).astype(np.int32)
+        ends = np.cumsum(self.counts, dtype=np.int64)
+        group = np.searchsorted(ends, index, side="right")
+        slots = (self.off[group] + index - (ends - self.counts)[group]).astype(np.int32)
         floats = np.empty((len(FLOAT_STATE) + 1, len(slots)), np.float32)  # and the log-weight
         ints = np.empty((len(INT_STATE), len(slots)), np.int32)
         if len(slots):
@@ -316,8 +317,8 @@ class ParticlePool:
         sums = np.zeros((table.shape[1], N_PP_SUMS))
         if n:
             self.k.eliminate(self.buf, pp, table, keep, sums)
-        self._eliminated = (pp, table.shape[1], keep)
-        return keep.astype(bool), sums
+        self._eliminated = (n, table.shape[1])
+        return keep.view(bool), sums  # 0 or 1 in int8
 
     def hand_over(self, drop, index: np.ndarray) -> None:
         """After :meth:`eliminate`: remove its eliminated particles and those of the populations
@@ -326,18 +327,19 @@ class ParticlePool:
         the later in state order (0: none)."""
         if self._eliminated is None:
             raise ParameterError("hand_over needs an eliminate first")
-        pp, n_pp, keep = self._eliminated
+        n, n_pp = self._eliminated
         drop = np.ascontiguousarray(drop, dtype=np.int8).reshape(-1)
         if drop.shape != (n_pp,):
             raise ParameterError(f"need one drop flag per population ({n_pp}), got {drop.shape}")
         if index.shape != self.frame_shape or index.dtype != np.int32 or not index.flags.c_contiguous:
             raise ParameterError(f"index image must be a C-contiguous int32 array of shape {self.frame_shape}")
         self._eliminated = None
-        if not len(pp):
+        if not n:
             index[...] = 0
             return
-        self.k.hand_over(self.buf, drop, index)
-        self.counts = self._counts_kept((keep != 0) & (drop[pp] == 0))
+        counts = np.empty(self.n_groups, np.int32)
+        self.k.hand_over(self.buf, drop, index, counts)
+        self.counts = counts
 
     # ------------------------------------------------------------ one step
 

@@ -108,9 +108,11 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
         return -3.0e38
     values, pixels = best_lef[valid, 0], best_lef[valid, 1].astype(np.int64)
     free = np.ones(len(values), bool)
-    for x, y in tracked:
-        cx, cy = nearest_pixel(x, y)
-        free &= (np.abs(pixels % width - cx) > TRACK_MASK_HALF) | (np.abs(pixels // width - cy) > TRACK_MASK_HALF)
+    if tracked:
+        centres = np.array([nearest_pixel(x, y) for x, y in tracked], np.int64)
+        near_x = np.abs(pixels[:, None] % width - centres[None, :, 0]) <= TRACK_MASK_HALF
+        near_y = np.abs(pixels[:, None] // width - centres[None, :, 1]) <= TRACK_MASK_HALF
+        free = ~(near_x & near_y).any(axis=1)
     return float(values[np.argmax(free)] if free.any() else values[-1]) + MSW_LEF_OFFSET
 
 
@@ -172,29 +174,26 @@ def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
 
 
-def dense_ranks(values: np.ndarray, table_limit: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
-    """Rank of each integer among the distinct values (0 … k − 1, in value order), and the k
-    distinct values.  A lookup table replaces the sort when the values span at most ``table_limit``."""
-    if len(values) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    lo, span = int(values.min()), int(values.max()) - int(values.min()) + 1
-    if span > table_limit:
-        distinct, ranks = np.unique(values, return_inverse=True)
-        return ranks.reshape(-1), distinct
-    present = np.zeros(span, bool)
-    present[values - lo] = True
-    return (np.cumsum(present) - 1)[values - lo], np.flatnonzero(present) + lo
-
-
-def populations(group: np.ndarray, seq: np.ndarray):
+def populations(group: np.ndarray, seq: np.ndarray, table_limit: int = 1 << 22):
     """Particle populations as (block, Seq) pairs, ordered by block then Seq.
 
-    Returns (block of each PP, PP index of each particle, particles per PP)."""
-    seq = seq.astype(np.int64)
-    lo = int(seq.min()) if len(seq) else 0
-    span = int(seq.max()) - lo + 1 if len(seq) else 1
-    code, keys = dense_ranks(group.astype(np.int64) * span + (seq - lo))  # block-major key
-    return keys // span, code, np.bincount(code, minlength=len(keys))
+    ``group``: each particle's block, non-decreasing (state order); ``seq``: its Seq.
+    Returns (block of each PP, PP index of each particle, particles per PP).  One bincount over
+    the (block, Seq) table when it has at most ``table_limit`` entries, else a sort."""
+    seq = np.asarray(seq)
+    if len(seq) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    lo, n_groups = int(seq.min()), int(group[-1]) + 1
+    span = int(seq.max()) - lo + 1
+    if n_groups * span > table_limit:
+        keys, code = np.unique(np.asarray(group, np.int64) * span + (seq.astype(np.int64) - lo), return_inverse=True)
+        return keys // span, code.reshape(-1), np.bincount(code.reshape(-1), minlength=len(keys))
+    key = (seq - lo).astype(np.int32)
+    key += (np.asarray(group) * span).astype(np.int32)  # block-major key
+    table = np.bincount(key, minlength=n_groups * span)
+    present = table > 0
+    keys = np.flatnonzero(present)
+    return keys // span, np.take(np.cumsum(present, dtype=np.int32), key) - 1, table[keys]
 
 
 def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:
@@ -338,13 +337,25 @@ class SGDSPF:
             prop[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
         return prop
 
+    def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
+        """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
+        blocks that have any: {block: (pixels, weights)} (one stable sort by block, not a pass per block)."""
+        pix = np.flatnonzero(support)
+        blocks = self.grid.block_id.ravel()[pix]
+        order = np.argsort(blocks, kind="stable")
+        pix, blocks = pix[order], blocks[order]
+        weights = proposal.ravel()[pix].astype(np.float64)
+        bounds = np.searchsorted(blocks, np.arange(self.grid.n_blocks + 1))
+        return {b: (pix[s:e], weights[s:e]) for b, (s, e) in enumerate(zip(bounds[:-1], bounds[1:])) if e > s}
+
     def _labels(self, support: np.ndarray) -> np.ndarray:
         """Eq. 36: existing PP ids where P_pp ≠ 0, else new ids from 8-connected components."""
-        n, comp = cv2.connectedComponents(support.astype(np.uint8), connectivity=8)
-        labels = np.where(comp > 0, comp + (self.next_pp - 1), 0).astype(np.int32)
+        n, labels = cv2.connectedComponents(support.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        np.add(labels, np.int32(self.next_pp - 1), out=labels, where=support)  # component k → PP id next_pp − 1 + k
         self.next_pp += n - 1
-        old = (self.pp_index != 0) & support
-        labels[old] = self.pp_index[old]
+        old = self.pp_index != 0
+        old &= support
+        np.copyto(labels, self.pp_index, where=old)
         return labels
 
     def _search_step(self, f: int, z: np.ndarray, front: FrontFrame) -> float:
@@ -352,10 +363,7 @@ class SGDSPF:
         p, pool, grid = self.p, self.search, self.grid
         proposal = self._suppress_tracked(front.proposal)
         support = proposal > 0
-        pix = np.flatnonzero(support)
-        blocks = grid.block_id.ravel()[pix]
-        maps = {b: (pix[blocks == b], proposal.ravel()[pix[blocks == b]].astype(np.float64))
-                for b in np.unique(blocks)}
+        maps = self._proposal_maps(proposal, support)
         pool.set_proposal_map(maps)
         pool.load_labels(self._labels(support))
         has_map = np.zeros(grid.n_blocks, bool)
@@ -387,17 +395,24 @@ class SGDSPF:
             pe, ptp = ne / n_pp, sums[:, P_TP] / n_pp  # Eq. 38 (PE = ΣE/N_pp)
             px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
         drop = np.zeros(len(counts), bool)
-        handed = []
+        handed = []  # the PPs handed over, in PP order
         tracked = [t.last_xy() for t in self.active]
         for k in np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0)):
             if near_any(tracked, px[k], py[k]):  # the target is tracked already
                 drop[k] = True
             elif len(handed) < len(self.free_groups):
                 drop[k] = True
-                handed.append(np.flatnonzero((inverse == k) & keep))
-        members = pool.states_at(np.concatenate(handed)) if handed else None
+                handed.append(k)
+        members, sizes = None, []
+        if handed:  # the handed PPs' kept particles, PP after PP, each in state order
+            rank = np.full(len(counts), -1, np.int32)
+            rank[handed] = np.arange(len(handed))
+            of = np.take(rank, inverse)
+            index = np.flatnonzero((of >= 0) & keep)
+            index = index[np.argsort(of[index], kind="stable")]
+            members, sizes = pool.states_at(index), np.bincount(of[index], minlength=len(handed)).tolist()
         pool.hand_over(drop, self.pp_index)
-        self._start_tracks(f, members, [len(m) for m in handed], rng, tracked)
+        self._start_tracks(f, members, sizes, rng, tracked)
 
     def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,
                       tracked: list) -> None:
@@ -406,12 +421,12 @@ class SGDSPF:
         ``tracked``: the active tracks' last positions, to which the new tracks are added."""
         n_tpf = self.p.N_tpf
         picks, groups = [], []
-        for start, size in zip(np.cumsum(sizes) - sizes, sizes):
+        starts = np.cumsum(sizes) - sizes
+        mean = self._pp_means(members, starts) if len(sizes) else {}
+        for k, (start, size) in enumerate(zip(starts, sizes)):
             if not self.free_groups:
                 break
-            st = {name: members[name][start:start + size] for name in ("x", "y", "vx", "vy", "inten", "e")}
-            e = st["e"] == 1
-            x, y = float(st["x"][e].mean()), float(st["y"][e].mean())
+            x, y = float(mean["x"][k]), float(mean["y"][k])
             if near_any(tracked, x, y):
                 continue
             picks.append(start + resize_population(size, n_tpf, rng.random(max(n_tpf, size))))
@@ -419,8 +434,7 @@ class SGDSPF:
             track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
                           log_ratios=deque(maxlen=self.p.icef_window))
             self.next_track_id += 1
-            track.path.append((f, x, y, float(st["vx"][e].mean()), float(st["vy"][e].mean()),
-                               float(st["inten"][e].mean()), 1.0))
+            track.path.append((f, x, y, float(mean["vx"][k]), float(mean["vy"][k]), float(mean["inten"][k]), 1.0))
             self.active.append(track)
             tracked.append((x, y))
         if groups:
@@ -428,6 +442,15 @@ class SGDSPF:
             index = np.concatenate([picks[k] for k in order])
             self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
                                          {name: members[name][index] for name in STATE}, np.asarray(groups))
+
+    @staticmethod
+    def _pp_means(members: dict, starts: np.ndarray) -> dict:
+        """Eq. 38's PP state: per PP (particles from ``starts[k]`` on, each PP with an E = 1 particle)
+        the mean x, y, vx, vy and intensity of its E = 1 particles (f64 sums)."""
+        e = members["e"] == 1
+        n_e = np.add.reduceat(e.astype(np.int64), starts)
+        return {name: np.add.reduceat(np.where(e, members[name], 0).astype(np.float64), starts) / n_e
+                for name in ("x", "y", "vx", "vy", "inten")}
 
     def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
         p, pool = self.p, self.tracks_pool

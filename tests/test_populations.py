@@ -143,7 +143,7 @@ def test_index_image_prefers_the_larger_population_then_the_later_particle(engin
     assert np.count_nonzero(index) == 3
 
 
-@pytest.mark.parametrize("seq_span", [7, 1 << 24])  # lookup-table and sort paths of dense_ranks
+@pytest.mark.parametrize("seq_span", [7, 1 << 24])  # the table and sort paths of populations
 def test_populations_number_block_seq_pairs_in_order(seq_span):
     """Against np.unique over (block, Seq) rows: same PP order (block, then Seq), the PP of every
     particle, its block and its size; Seq 0 and a Seq shared by two blocks included."""

@@ -4,11 +4,13 @@ from collections import deque
 
 import numpy as np
 import pytest
+import scipy.ndimage as ndi
 
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.params import PAPER_SALIENCY
 from tbd_taichi.errors import InputError
+from tbd_taichi.frontend import FrontEnd
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.sgds import (MSW_LEF_OFFSET, SGDSPF, icef_of_log_ratio, log_weight_ratio, msw_from_candidates,
                              resize_population, scef, update_confidence, windowed_icef)
@@ -76,17 +78,16 @@ def test_windowed_icef_lets_a_faint_compact_track_reach_c_equal_1():
         assert (n_rt > 5) == expect_confirmed, (window, n_rt, c)
 
 
-def test_windowed_icef_confirms_a_target_eq40_alone_misses():
-    """200×200, SNR 1.2, scenario seed 30, with the paper's saliency and MSW (the setting the window was
-    chosen in): with Eq. 40 alone (icef_window 1) the target is never confirmed (DSR 0); with the 10-frame
-    window it is (DSR 0.35), and no false track.  Over seeds 20–59 the window lifted TSR from 0.65 to
-    0.75 with one false track (docs/results/suite_analysis.md)."""
-    scores = {}
-    for window in (1, 10):
-        _, tracks, scene = run((200, 200), 150, 1.2, 30, icef_window=window, **PAPER_SALIENCY)
-        scores[window] = tbd.metrics.evaluate(tracks, scene.truth)
-    assert scores[1]["dsr"] <= 0.2, scores[1]
-    assert scores[10]["dsr"] > 0.2 and scores[10]["false_tracks"] == 0, scores[10]
+@pytest.mark.slow
+def test_paper_saliency_with_the_icef_window_confirms_faint_targets():
+    """200×200, SNR 1.2, scenario seeds 30–37, with the paper's saliency and MSW (the setting the window
+    was chosen in) and the 10-frame window: measured DSR 0.13, 0.43, 0.84, 0.37, 0.00, 0.29, 0.88, 0.69
+    (6 of 8 found, no false track); Eq. 40 alone (icef_window 1) found 5 (0.13, 0.00, 0.84, 0.33, 0.00,
+    0.29, 0.88, 0.69).  Eight runs cannot separate the two (over seeds 20–59 the window lifted TSR from
+    0.65 to 0.75); the test above pins the mechanism, this one that the chain still confirms faint targets."""
+    scores = [score((200, 200), 150, 1.2, seed, icef_window=10, **PAPER_SALIENCY) for seed in range(30, 38)]
+    assert sum(s["dsr"] > 0.2 for s in scores) >= 5, scores
+    assert sum(s["false_tracks"] for s in scores) == 0, scores
 
 
 def test_icef_window_threshold_follows_the_frame_area():
@@ -129,19 +130,72 @@ def test_msw_from_candidates_skips_tracked_candidates():
     assert log_weight_ratio(2.0, msw_from_candidates(none, w, [])) == 0.0
 
 
+def test_proposal_maps_are_each_blocks_support_in_pixel_order(rng):
+    """SGDSPF._proposal_maps against a pass per block: 130×251 at the SNR 1.2 preset (L_ib 100: 2×3
+    blocks of unequal sizes), a sparse random proposal with one block left empty."""
+    tracker = SGDSPF((130, 251), snr=1.2, engine="numpy")
+    proposal = np.where(rng.random((130, 251)) < 0.05, rng.random((130, 251)), 0.0).astype(np.float32)
+    proposal[tracker.grid.block_id == 4] = 0
+    maps = tracker._proposal_maps(proposal, proposal > 0)
+    block = tracker.grid.block_id.ravel()
+    expected = {b: np.flatnonzero((block == b) & (proposal.ravel() > 0)) for b in range(tracker.grid.n_blocks)}
+    assert sorted(maps) == [b for b, pix in expected.items() if len(pix)] == [0, 1, 2, 3, 5]
+    for b, (pix, weights) in maps.items():
+        np.testing.assert_array_equal(pix, expected[b])
+        assert weights.dtype == np.float64
+        np.testing.assert_array_equal(weights, proposal.ravel()[pix])
+
+
+def test_pp_labels_keep_existing_ids_and_number_new_components(rng):
+    """Eq. 36 (SGDSPF._labels): support pixels with a P_pp id keep it; the others get new ids
+    next_pp − 1 + k by 8-connected component k (same partition as scipy.ndimage.label); 0 elsewhere."""
+    tracker = SGDSPF((61, 47), snr=1.4, engine="numpy")
+    support = ndi.binary_dilation(rng.random((61, 47)) < 0.02, iterations=1)
+    support[0, :] = support[-1, -5:] = True  # components along the borders
+    tracker.pp_index[10:20, 10:20] = 7
+    tracker.next_pp = 40
+    labels = tracker._labels(support)
+    reference, n = ndi.label(support, structure=np.ones((3, 3)))
+    assert tracker.next_pp == 40 + n
+    assert np.all(labels[~support] == 0)
+    old = support & (tracker.pp_index != 0)
+    assert old.any() and np.all(labels[old] == 7)
+    new = support & ~old
+    for k in range(1, n + 1):  # one new id per component, distinct across components
+        ids = np.unique(labels[new & (reference == k)])
+        assert len(ids) <= 1 and (len(ids) == 0 or 40 <= ids[0] < 40 + n)
+    firsts = [np.unique(labels[new & (reference == k)]) for k in range(1, n + 1)]
+    assert len({int(i[0]) for i in firsts if len(i)}) == sum(len(i) > 0 for i in firsts)
+
+
+def proposal_mass_near_target(seed: int, **params) -> float:
+    """Mean over frames 10–57 of the share of the whole frame's proposal (OPsal_N, all blocks) within
+    1.5 px of the true target: 200×200, SNR 1.2 preset, 60 frames, NumPy engine (deterministic)."""
+    p = tbd.SGDSParams.for_snr(1.2, **params)
+    scene = tbd.simulate((200, 200), 60, 1.2, seed=seed)
+    front = FrontEnd((200, 200), snr=1.2, L_ib=p.L_ib, psf_sigma=p.psf_sigma, background="none", bad_pixels=True,
+                     engine="numpy", lef_memory=p.lef_memory, lef_scale=p.lef_scale)
+    yy, xx = np.mgrid[:200, :200]
+    shares = []
+    for frame in scene.frames:
+        for out in front.push(frame):
+            t = scene.truth[scene.truth["frame"] == out.frame][0]
+            near = np.hypot(xx - t["x"], yy - t["y"]) <= 1.5
+            shares.append(out.proposal[near].sum(dtype=np.float64) / max(out.proposal.sum(dtype=np.float64), 1e-300))
+    return float(np.mean(shares[10:]))
+
+
 @pytest.mark.slow
-def test_multi_frame_lef_finds_more_faint_targets_than_eq29():
-    """200×200, SNR 1.2, scenario seeds 12–19.  Defaults (multi-frame LEF, MSW from the candidates):
-    measured DSR 0.35, 0.61, 0.73, 0.77, 0.89, 0.00, 0.31, 0.49 (7 found, mean 0.52, no false track);
-    the paper's Eq. 29 and MSW: 0.00, 0.68, 0.59, 0.43, 0.54, 0.00, 0.00, 0.51 (5 found, mean 0.34, one
-    false track).  Over the suite's 100 seeds: TSR 0.67 → 0.74, mean DSR 0.41 → 0.50 (docs/results/suite.md)."""
-    results = {}
-    for name, kw in (("default", {}), ("paper", PAPER_SALIENCY)):
-        scores = [score((200, 200), 150, 1.2, seed, **kw) for seed in range(12, 20)]
-        results[name] = (sum(s["dsr"] > 0.2 for s in scores), np.mean([s["dsr"] for s in scores]),
-                         sum(s["false_tracks"] for s in scores))
-    assert results["default"][0] >= 6 and results["default"][2] == 0, results
-    assert results["default"][1] > results["paper"][1] + 0.08, results
+def test_multi_frame_lef_puts_more_of_the_proposal_on_faint_targets_than_eq29():
+    """The mechanism behind lef_memory: seeds 12–19, the default (multi-frame LEF) against Eq. 29 as
+    printed (PAPER_SALIENCY).  Measured: 0.020, 0.004, 0.002, 0.036, 0.129, 0.034, 0.007, 0.012 (mean
+    0.031) against 0.002, 0.002, 0.002, 0.005, 0.009, 0.006, 0.001, 0.003 (mean 0.0037): 8.3×, and more
+    than 2× on 7 of the 8 seeds.  (What it does to detection is a statistical matter for the suite: over
+    its 100 seeds TSR 0.67 → 0.74, mean DSR 0.41 → 0.50, docs/results/suite.md.)"""
+    ours = [proposal_mass_near_target(seed) for seed in range(12, 20)]
+    paper = [proposal_mass_near_target(seed, **PAPER_SALIENCY) for seed in range(12, 20)]
+    assert np.mean(ours) > 4 * np.mean(paper), (ours, paper)
+    assert sum(a > 2 * b for a, b in zip(ours, paper)) >= 6, (ours, paper)
 
 
 def test_scef_eqs41_42_sound_reading():

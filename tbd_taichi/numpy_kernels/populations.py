@@ -54,7 +54,7 @@ class NumpyPopulationKernels:
         sums[:, P_Y] = np.bincount(pp, weights=np.where(with_e, self.y[b, slots], 0), minlength=n_pp)
         self._eliminated = (pp.copy(), size, kept)
 
-    def hand_over(self, b, drop, index) -> None:
+    def hand_over(self, b, drop, index, counts) -> None:
         pp, size, kept = self._eliminated
         slots = self.live_slots()
         keep = kept & (drop[pp] == 0)
@@ -67,6 +67,7 @@ class NumpyPopulationKernels:
         index[:] = 0
         index[y[inside][order], x[inside][order]] = seq[inside][order]
         self.keep_particles(b, keep)
+        counts[:] = self.n
 
     def read_seq(self, b, seq) -> None:
         seq[:] = self.seq[b, self.live_slots()]
