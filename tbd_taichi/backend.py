@@ -177,6 +177,12 @@ def serial_loops(pixels: int) -> bool:
     return cfg is not None and cfg.arch == "cpu" and pixels <= SERIAL_PIXELS
 
 
+def cpu_threads() -> int:
+    """Worker threads of the CPU runtime: ``init``'s ``threads``, else the core count."""
+    cfg = current()
+    return (cfg.threads if cfg is not None and cfg.threads else None) or os.cpu_count() or 1
+
+
 def _transfer_kernel(direction: str, ndim: int):
     from .kernels import transfer
 

@@ -347,7 +347,13 @@ def test_weights_use_the_frame_as_it_was_loaded(rng):
     assert np.abs(t.state()["logw"]).max() > 0
 
 
-def test_same_results_with_one_and_two_threads(rng):
+def test_same_results_with_one_and_two_threads(rng, monkeypatch):
+    """The parallel loops (forced: pools this small, or CPUs with two threads, run serially) give the
+    same particles with one worker thread and with two."""
+    import tbd_taichi.particles as particles
+
+    monkeypatch.setattr(particles, "SERIAL_PARTICLES", 0)
+    monkeypatch.setattr(particles, "SERIAL_THREADS", 0)
     states = random_states(rng, CAPS, SHAPE)
     z = rng.standard_normal(SHAPE).astype(np.float32)
 
@@ -368,6 +374,23 @@ def test_same_results_with_one_and_two_threads(rng):
         tbd_taichi.init(TEST_ARCH)
     for key in one:
         np.testing.assert_array_equal(one[key], two[key])
+
+
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the serial/parallel choice is the CPU's")
+def test_particle_loops_are_serial_for_small_pools_or_two_threads():
+    """Serial loops up to SERIAL_PARTICLES slots, and at any size with at most SERIAL_THREADS CPU
+    threads (measured faster there); parallel for large pools on more threads."""
+    import tbd_taichi.particles as particles
+
+    big = particles.SERIAL_PARTICLES + 1
+    try:
+        tbd_taichi.init("cpu", threads=2)
+        assert ParticlePool([big], SHAPE).k.serial
+        tbd_taichi.init("cpu", threads=4)
+        assert not ParticlePool([big], SHAPE).k.serial
+        assert ParticlePool([1000], SHAPE).k.serial
+    finally:
+        tbd_taichi.init(TEST_ARCH)
 
 
 def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):

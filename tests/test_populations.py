@@ -20,6 +20,7 @@ def pool_engine(engine, monkeypatch):
         import tbd_taichi.particles as particles
 
         monkeypatch.setattr(particles, "SERIAL_PARTICLES", 0)
+        monkeypatch.setattr(particles, "SERIAL_THREADS", 0)  # also on a 2-core machine
         return "taichi"
     return engine
 
