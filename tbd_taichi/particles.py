@@ -276,10 +276,16 @@ class ParticlePool:
 
     # ------------------------------------------------------------ particle populations (SGDS-PF Eqs. 36–38)
 
-    def seq_in_state_order(self) -> np.ndarray:
-        """The Seq (particle-population label, Eq. 36) of every live particle, in :meth:`state` order."""
-        seq = np.empty(int(self.counts.sum()), np.int32)
-        if len(seq):
+    def seq_in_state_order(self, out: np.ndarray | None = None) -> np.ndarray:
+        """The Seq (particle-population label, Eq. 36) of every live particle, in :meth:`state` order;
+        into the front of ``out`` (int32, at least that long) if given, which saves a fresh array per frame."""
+        n = int(self.counts.sum())
+        if out is None:
+            out = np.empty(n, np.int32)
+        elif out.dtype != np.int32 or out.ndim != 1 or len(out) < n or not out.flags.c_contiguous:
+            raise ParameterError(f"out must be a C-contiguous int32 array of at least {n} elements")
+        seq = out[:n]
+        if n:
             self.k.read_seq(self.buf, seq)
         return seq
 

@@ -146,12 +146,14 @@ def windowed_icef(value: float, recent_log_ratios, window: int, mean_ratio: floa
     return 1.0 if sum(recent_log_ratios) / window >= math.log(mean_ratio) else value
 
 
-def scef(cov: np.ndarray, t_devr: float) -> float:
+def scef(cov: np.ndarray, t_devr: float):
     """Eqs. 41–42, sound reading: 1.1 if the spread along x, y and the diagonals is ≤ T_devr,
-    else T_devr / (largest spread) < 1."""
-    var_x, var_y, cov_xy = max(cov[0, 0], 0.0), max(cov[1, 1], 0.0), cov[0, 1]
-    spread = max(math.sqrt(var_x), math.sqrt(var_y), math.sqrt((var_x + var_y) / 2 + abs(cov_xy)))
-    return 1.1 if spread <= t_devr else t_devr / spread
+    else T_devr / (largest spread) < 1.  ``cov``: one (2, 2) covariance, or a stack (…, 2, 2) (one value each)."""
+    cov = np.asarray(cov, np.float64)
+    var_x, var_y, cov_xy = np.maximum(cov[..., 0, 0], 0.0), np.maximum(cov[..., 1, 1], 0.0), cov[..., 0, 1]
+    spread = np.maximum(np.maximum(np.sqrt(var_x), np.sqrt(var_y)), np.sqrt((var_x + var_y) / 2 + np.abs(cov_xy)))
+    with np.errstate(divide="ignore", invalid="ignore"):  # spread 0 (or NaN: an empty group) takes the other branch
+        return np.where(spread <= t_devr, 1.1, t_devr / spread)
 
 
 def update_confidence(c: float, icef_value: float, scef_value: float) -> float:
@@ -256,6 +258,7 @@ class SGDSPF:
                                           vmax=p.V_limit, intensity=intensity)
         self.icef_ratio = p.icef_ratio_for(self.shape[0] * self.shape[1])  # the ICEF window's threshold
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
+        self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
         self.ended_groups: list[int] = []  # groups of tracks ended this frame, emptied by _release_groups
@@ -386,7 +389,7 @@ class SGDSPF:
 
         p, pool = self.p, self.search
         group = np.repeat(np.arange(pool.n_groups), pool.counts)
-        pp_block, inverse, counts = populations(group, pool.seq_in_state_order())
+        pp_block, inverse, counts = populations(group, pool.seq_in_state_order(out=self._seq))
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
         keep, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))
@@ -457,22 +460,24 @@ class SGDSPF:
         if not self.active:
             return []
         pool.step(f, z)
-        log_mtw = pool.max_log_weights()
         est = pool.estimates()
+        log_mtw = est.max_logw.tolist()
+        finite = np.isfinite(est.x).tolist()
+        states = np.stack([est.x, est.y, est.vx, est.vy, est.intensity], axis=1).tolist()
+        scefs = scef(est.cov, p.T_devr).tolist()  # every group at once; only the active ones are read
         rows = []
         h, w = self.shape
         for t in list(self.active):
             g = t.group
-            t.frames_without_e = t.frames_without_e + 1 if not np.isfinite(est.x[g]) else 0
-            log_r = log_weight_ratio(float(log_mtw[g]), log_msw)
+            t.frames_without_e = t.frames_without_e + 1 if not finite[g] else 0
+            log_r = log_weight_ratio(log_mtw[g], log_msw)
             t.log_ratios.append(log_r)
             intensity_cef = windowed_icef(icef_of_log_ratio(log_r), t.log_ratios, p.icef_window, self.icef_ratio)
-            t.confidence = update_confidence(t.confidence, intensity_cef, scef(est.cov[g], p.T_devr))
-            if np.isfinite(est.x[g]):  # Eq. 39
+            t.confidence = update_confidence(t.confidence, intensity_cef, scefs[g])
+            if finite[g]:  # Eq. 39
                 if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's
                     t.path.pop()
-                t.path.append((f, float(est.x[g]), float(est.y[g]), float(est.vx[g]), float(est.vy[g]),
-                               float(est.intensity[g]), t.confidence))
+                t.path.append((f, *states[g], t.confidence))
             x, y = t.last_xy()
             lost = t.frames_without_e >= LOST_FRAMES or not (-0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5)
             if t.confidence < p.T_ft or lost:

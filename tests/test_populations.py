@@ -76,6 +76,12 @@ def test_eliminate_and_hand_over_match_the_host_reference(engine, monkeypatch):
     pool = make_pool(engine)
     st = pool.state()
     np.testing.assert_array_equal(pool.seq_in_state_order(), st["seq"])
+    buffer = np.full(pool.capacity + 3, -7, np.int32)
+    seq = pool.seq_in_state_order(out=buffer)
+    assert np.shares_memory(seq, buffer) and np.all(buffer[len(seq):] == -7)
+    np.testing.assert_array_equal(seq, st["seq"])
+    with pytest.raises(ParameterError, match="int32"):
+        pool.seq_in_state_order(out=np.zeros(pool.capacity, np.int64))
     pp_block, inverse, counts = populations(st["group"], st["seq"])
     take = eliminated_per_population(pp_block, counts, 300)
     take[0], take[-1] = 0, counts[-1]  # none and all of a population go

@@ -204,6 +204,9 @@ def test_scef_eqs41_42_sound_reading():
     assert scef(np.diag([9.0, 1.0]), t) == pytest.approx(t / 3)
     anti = np.array([[2.0, -1.9], [-1.9, 2.0]])  # elongated along a diagonal: √cov would be imaginary
     assert scef(anti, t) == pytest.approx(t / math.sqrt(2.0 + 1.9))
+    stack = np.stack([np.diag([1.0, 1.0]), np.diag([9.0, 1.0]), anti, np.zeros((2, 2)), np.full((2, 2), np.nan)])
+    np.testing.assert_array_equal(scef(stack, t)[:4], [scef(c, t) for c in stack[:4]])  # one value per group
+    assert np.isnan(scef(stack, t)[4])  # an empty group's NaN covariance stays NaN (never read)
 
 
 def test_confidence_eq43():
