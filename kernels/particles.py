@@ -35,8 +35,8 @@ S_SYSTEMATIC = 99  # u0 of systematic resampling, one per group
 NOISE_STREAMS = (S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I)  # n1 … n5 of ``propagate``
 
 # per-group sums of ``moments`` (f64)
-M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY = range(13)
-N_MOMENTS = 13
+M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY, M_EXX, M_EYY, M_EXY = range(16)
+N_MOMENTS = 16
 
 
 @ti.func
@@ -717,7 +717,8 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def tile_sums(self, b: ti.i32):
-        """Per tile (serially, in slot order): the sums behind Eq. 19, P(E), mean Tp and the covariance."""
+        """Per tile (serially, in slot order): the sums behind Eq. 19, P(E), mean Tp and the covariances of
+        all particles and of the E = 1 particles."""
         ti.loop_config(serialize=self.serial)
         for t in range(self.tile_start.shape[0]):
             acc = ti.Vector([0.0] * N_MOMENTS, dt=ti.f64)
@@ -727,7 +728,8 @@ class ParticleKernels(PopulationKernels):
                 y = ti.cast(self.y[b, i], ti.f64)
                 acc += ti.Vector([1.0, e, e * x, e * ti.cast(self.vx[b, i], ti.f64), e * y,
                                   e * ti.cast(self.vy[b, i], ti.f64), e * ti.cast(self.inten[b, i], ti.f64),
-                                  ti.cast(self.tp[b, i], ti.f64), x, y, x * x, y * y, x * y], dt=ti.f64)
+                                  ti.cast(self.tp[b, i], ti.f64), x, y, x * x, y * y, x * y,
+                                  e * x * x, e * y * y, e * x * y], dt=ti.f64)
             for k in ti.static(range(N_MOMENTS)):
                 self.tile_moments[t, k] = acc[k]
 

@@ -61,6 +61,7 @@ class GroupEstimates:
     intensity: np.ndarray  # total intensity (Eq. 14 units)
     tp_mean: np.ndarray  # mean presence count Tp
     cov: np.ndarray  # (G, 2, 2) covariance of all particles' (x, y), px²
+    cov_e: np.ndarray  # (G, 2, 2) covariance of the E = 1 particles' (x, y), px² (NaN without any)
     max_logw: np.ndarray  # largest log-weight of an E = 1 particle in the last step
 
 
@@ -425,20 +426,24 @@ class ParticlePool:
         return np.concatenate(out) if out else np.zeros(0)
 
     def estimates(self) -> GroupEstimates:
-        """Eq. 19, existence probability, mean Tp and covariance per group (current buffer)."""
-        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EY, M_N, M_TP, M_X, M_XX, M_XY, M_Y,
-                                        M_YY, N_MOMENTS)
+        """Eq. 19, existence probability, mean Tp and covariances per group (current buffer)."""
+        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY, M_EYY, M_N, M_TP, M_X,
+                                        M_XX, M_XY, M_Y, M_YY, N_MOMENTS)
 
         m = np.empty((self.n_groups, N_MOMENTS))
         self.k.estimates(self.buf, m)
         n, ne = m[:, M_N], m[:, M_E]
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = lambda col, d: np.where(d > 0, m[:, col] / d, np.nan)  # noqa: E731
-            mx, my = mean(M_X, n), mean(M_Y, n)
-            cov = np.empty((self.n_groups, 2, 2))
-            cov[:, 0, 0] = mean(M_XX, n) - mx * mx
-            cov[:, 1, 1] = mean(M_YY, n) - my * my
-            cov[:, 0, 1] = cov[:, 1, 0] = mean(M_XY, n) - mx * my
+
+            def covariance(xx, yy, xy, x, y, d):
+                mx, my = mean(x, d), mean(y, d)
+                cov = np.empty((self.n_groups, 2, 2))
+                cov[:, 0, 0] = mean(xx, d) - mx * mx
+                cov[:, 1, 1] = mean(yy, d) - my * my
+                cov[:, 0, 1] = cov[:, 1, 0] = mean(xy, d) - mx * my
+                return cov
             return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), mean(M_EX, ne),
-                                  mean(M_EVX, ne), mean(M_EY, ne), mean(M_EVY, ne), mean(M_EI, ne), mean(M_TP, n), cov,
-                                  self.max_log_weights())
+                                  mean(M_EVX, ne), mean(M_EY, ne), mean(M_EVY, ne), mean(M_EI, ne), mean(M_TP, n),
+                                  covariance(M_XX, M_YY, M_XY, M_X, M_Y, n),
+                                  covariance(M_EXX, M_EYY, M_EXY, M_EX, M_EY, ne), self.max_log_weights())

@@ -74,6 +74,7 @@ def test_every_stage_matches_the_numpy_twin(rng):
     for field in ("x", "y", "vx", "vy", "intensity"):  # means of states that agree to f32 ulps
         np.testing.assert_allclose(getattr(et, field), getattr(en, field), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(et.cov, en.cov, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(et.cov_e, en.cov_e, rtol=1e-5, atol=1e-6)
 
 
 def test_existence_prediction_statistics():
@@ -305,6 +306,12 @@ def test_estimates_eq19_and_covariance(rng):
         assert est.tp_mean[g] == pytest.approx(s["tp"][sel].mean())
         cov = np.cov(np.stack([s["x"][sel], s["y"][sel]]).astype(np.float64), bias=True)
         np.testing.assert_allclose(est.cov[g], cov, rtol=1e-6, atol=1e-9)
+        cov_e = np.cov(np.stack([s["x"][sel][e], s["y"][sel][e]]).astype(np.float64), bias=True)  # SCEF's
+        np.testing.assert_allclose(est.cov_e[g], cov_e, rtol=1e-6, atol=1e-9)
+        assert not np.allclose(est.cov_e[g], est.cov[g])  # a different cloud
+    empty = ParticlePool([10, 10], SHAPE, engine="taichi")
+    empty.set_state({0: dict(x=np.arange(10.0), y=np.zeros(10), vx=0, vy=0, inten=1.0, e=0, tp=1)})
+    assert np.all(np.isnan(empty.estimates().cov_e))  # no E = 1 particle, or no particle at all
 
 
 @pytest.mark.parametrize("engine", ["taichi", "numpy"])

@@ -356,7 +356,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
             ev = self.e[b, s:e].astype(np.float64)
             x, y = self.x[b, s:e].astype(np.float64), self.y[b, s:e].astype(np.float64)
             cols = [np.ones_like(ev), ev, ev * x, ev * self.vx[b, s:e], ev * y, ev * self.vy[b, s:e],
-                    ev * self.inten[b, s:e], self.tp[b, s:e].astype(np.float64), x, y, x * x, y * y, x * y]
+                    ev * self.inten[b, s:e], self.tp[b, s:e].astype(np.float64), x, y, x * x, y * y, x * y,
+                    ev * x * x, ev * y * y, ev * x * y]
             self.tile_moments[t] = [np.sum(c, dtype=np.float64) for c in cols]
 
     def estimates(self, b: int, moments: np.ndarray) -> None:
