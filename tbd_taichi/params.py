@@ -96,10 +96,12 @@ class SGDSParams:
         params = cls(snr=float(snr), L_ib=l_ib, N_sump=n_sump, T_PE=t_pe, T_PTp=t_ptp, T_ft=t_ft, T_rt=t_rt)
         return replace(params, **overrides).validated()
 
-    def icef_ratio_for(self, pixels: int) -> float:
-        """The ICEF window's threshold on the geometric mean of MTW/MSW for a frame of ``pixels`` px:
-        icef_mean_ratio × (ICEF_REFERENCE_PIXELS / pixels)^icef_area_exponent, at most 1."""
-        return min(self.icef_mean_ratio * (ICEF_REFERENCE_PIXELS / pixels) ** self.icef_area_exponent, 1.0)
+    def icef_ratio_for(self, pixels: int, ratio: float | None = None) -> float:
+        """An ICEF threshold on MTW/MSW for a frame of ``pixels`` px: ``ratio`` (default icef_mean_ratio, the
+        window's) × (ICEF_REFERENCE_PIXELS / pixels)^icef_area_exponent, at most 1.  MSW, an extreme of the
+        noise, grows with the searched area, so a ratio chosen at 200×200 is scaled to the frame."""
+        ratio = self.icef_mean_ratio if ratio is None else ratio
+        return min(ratio * (ICEF_REFERENCE_PIXELS / pixels) ** self.icef_area_exponent, 1.0)
 
     @property
     def T_devr(self) -> float:

@@ -57,6 +57,7 @@ DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are 
 TRACK_MASK_HALF = math.ceil(DUPLICATE_RADIUS)  # px: half-side of the square around a track kept out of the search
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
 MSW_LEF_OFFSET = 0.3  # ln MSW − the frame's best candidate LEF, measured with the printed MSW (msw_from_candidates)
+ICEF_LOWER = 0.1  # Eq. 40: ICEF = 1 for 0.1 ≤ MTW/MSW < 1 (at 200×200; scaled to the frame area)
 PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight on the newest frame
 
 
@@ -119,11 +120,12 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
     return float(values[np.argmax(free)] if free.any() else values[-1]) + MSW_LEF_OFFSET
 
 
-def icef_of_log_ratio(log_r: float) -> float:
+def icef_of_log_ratio(log_r: float, lower: float = ICEF_LOWER) -> float:
     """Eq. 40 on r = exp(``log_r``) = MTW/MSW (from :func:`log_weight_ratio`): r if r ≥ 1, 1 if
-    0.1 ≤ r < 1, else 0.9."""
+    ``lower`` ≤ r < 1, else 0.9.  ``lower`` is 0.1 as printed; the tracker scales it to the frame area
+    like the window's threshold (``SGDSParams.icef_ratio_for``)."""
     r = math.exp(log_r)
-    return r if r >= 1 else (1.0 if r >= 0.1 else 0.9)
+    return r if r >= 1 else (1.0 if r >= lower else 0.9)
 
 
 def log_weight_ratio(log_mtw: float, log_msw: float) -> float:
@@ -260,6 +262,7 @@ class SGDSPF:
         self.tracks_pool.configure_groups(np.arange(max_tracks), "copy", pb=p.P_b, pd=p.P_d_track,
                                           vmax=p.V_limit, intensity=intensity)
         self.icef_ratio = p.icef_ratio_for(self.shape[0] * self.shape[1])  # the ICEF window's threshold
+        self.icef_lower = p.icef_ratio_for(self.shape[0] * self.shape[1], ICEF_LOWER)  # Eq. 40's 0.1, scaled
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
         self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
@@ -475,7 +478,8 @@ class SGDSPF:
             t.frames_without_e = t.frames_without_e + 1 if not finite[g] else 0
             log_r = log_weight_ratio(log_mtw[g], log_msw)
             t.log_ratios.append(log_r)
-            intensity_cef = windowed_icef(icef_of_log_ratio(log_r), t.log_ratios, p.icef_window, self.icef_ratio)
+            intensity_cef = windowed_icef(icef_of_log_ratio(log_r, self.icef_lower), t.log_ratios, p.icef_window,
+                                          self.icef_ratio)
             t.confidence = update_confidence(t.confidence, intensity_cef, scefs[g])
             if finite[g]:  # Eq. 39
                 if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's
