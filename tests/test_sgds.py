@@ -100,6 +100,11 @@ def test_icef_window_threshold_follows_the_frame_area():
     assert p.icef_ratio_for(4 * 4) == 1.0  # capped: never stricter than Eq. 40's r ≥ 1
     assert tbd.SGDSParams.for_snr(1.2, icef_area_exponent=0).icef_ratio_for(50 * 50) == 0.05
     assert SGDSPF((50, 50), snr=1.2).icef_ratio == pytest.approx(0.05 * 16 ** 0.45)
+    # Eq. 40's own bound 0.1 scales the same way: printed at 200×200, stricter in smaller frames
+    assert SGDSPF((200, 200), snr=1.2).icef_lower == 0.1
+    assert SGDSPF((50, 50), snr=1.2).icef_lower == pytest.approx(0.1 * 16 ** 0.45)  # 0.348
+    assert p.icef_ratio_for(320 * 256, 0.1) == pytest.approx(0.1 * (40000 / 81920) ** 0.45)  # 0.072
+    assert icef_of_log_ratio(math.log(0.2)) == 1.0 and icef_of_log_ratio(math.log(0.2), 0.348) == 0.9
 
 
 def test_area_scaled_icef_window_drops_a_small_frame_false_track():
