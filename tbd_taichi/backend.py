@@ -180,7 +180,7 @@ def serial_loops(pixels: int) -> bool:
 def cpu_threads() -> int:
     """Worker threads of the CPU runtime: ``init``'s ``threads``, else the core count."""
     cfg = current()
-    return (cfg.threads if cfg is not None and cfg.threads else None) or os.cpu_count() or 1
+    return (cfg.threads if cfg is not None else None) or os.cpu_count() or 1
 
 
 def _transfer_kernel(direction: str, ndim: int):
