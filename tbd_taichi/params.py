@@ -72,6 +72,13 @@ class SGDSParams:
     icef_window: int = 10
     icef_mean_ratio: float = 0.05
     icef_area_exponent: float = 0.45
+    # not in the paper: a track is also confirmed once its cloud has been compact (SCEF = 1.1, Eq. 42) in
+    # each of its last confirm_window frames with a geometric mean of MTW/MSW ≥ confirm_mean_ratio
+    # (scaled to the frame area like icef_mean_ratio).  At SNR 1.2 a target held that long by a compact
+    # cloud often stays below the ICEF window's 0.05, so C decays by 0.9·1.1 per frame and never returns to 1
+    # (docs/results/suite_analysis.md); confirm_window = 0 is the paper's confirmation (Eq. 43's N_rt) alone
+    confirm_window: int = 30
+    confirm_mean_ratio: float = 0.03
     # not in the paper: Eq. 29's weight from the multi-frame LEF, lef_scale·L with
     # L(f) = log ω̌⁺(f) + lef_memory·max3×3 L(f − 1) (a velocity-free dynamic-programming sum over about
     # 1/(1 − lef_memory) frames); lef_memory = 0 is Eq. 29 as printed.  At SNR 1.2 it puts about 8×
@@ -123,6 +130,8 @@ class SGDSParams:
             ("icef_window", isinstance(self.icef_window, int) and self.icef_window >= 1, "an integer ≥ 1"),
             ("icef_mean_ratio", 0 < self.icef_mean_ratio <= 1, "in (0, 1]"),
             ("icef_area_exponent", self.icef_area_exponent >= 0, "≥ 0"),
+            ("confirm_window", isinstance(self.confirm_window, int) and self.confirm_window >= 0, "an integer ≥ 0"),
+            ("confirm_mean_ratio", 0 < self.confirm_mean_ratio <= 1, "in (0, 1]"),
             ("lef_memory", 0 <= self.lef_memory < 1, "in [0, 1)"), ("lef_scale", self.lef_scale > 0, "> 0"),
             ("msw_reference", self.msw_reference in MSW_REFERENCES, f"one of {', '.join(MSW_REFERENCES)}"),
         ]

@@ -25,7 +25,9 @@ particles are not propagated, so their positions are where each died, up to tens
 a moving target, and at low SNR (where resampling keeps them) they spread the cloud and end the
 target's track (200×200, SNR 1.2, seeds 0–39: TSR 0.65 → 0.83 against all particles); ICEF is also 1 when MTW/MSW's geometric mean
 over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio``, scaled to the frame area
-(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); Eq. 29's weight is the multi-frame
+(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); a track is also confirmed once its cloud
+has been compact for ``confirm_window`` frames with MTW/MSW's geometric mean ≥ ``confirm_mean_ratio`` (not in the
+paper, :func:`held_compact`); Eq. 29's weight is the multi-frame
 LEF (``lef_memory``, ``lef_scale``) and Eq. 40's MSW the best untracked candidate's LEF (``msw_reference``,
 :func:`msw_from_candidates`), both not in the paper (``PAPER_SALIENCY`` restores them); a track also ends when its estimate
 leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
@@ -75,6 +77,7 @@ class Track:
     reported: bool = False  # confirmed and its peak z has reached min_peak_z
     path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
     log_ratios: deque = field(default_factory=deque)  # ln(MTW/MSW) of the last icef_window frames
+    held: deque = field(default_factory=deque)  # (ln(MTW/MSW), SCEF = 1.1) of the last confirm_window frames
 
     def last_xy(self) -> tuple[float, float]:
         return self.path[-1][1], self.path[-1][2]
@@ -149,6 +152,20 @@ def windowed_icef(value: float, recent_log_ratios, window: int, mean_ratio: floa
     if value != 0.9 or window <= 1 or len(recent_log_ratios) < window:
         return value
     return 1.0 if sum(recent_log_ratios) / window >= math.log(mean_ratio) else value
+
+
+def held_compact(held, window: int, log_mean_ratio: float) -> bool:
+    """Confirmation by a long window (not in the paper): over the track's last ``window`` frames
+    (``held``: (ln MTW/MSW, whether SCEF = 1.1) per frame, the newest last) its tracking PF's E = 1 cloud
+    was compact in every frame (Eq. 42) and the geometric mean of MTW/MSW (Eq. 40) is ≥
+    exp(``log_mean_ratio``).  ``window`` = 0: never (Eq. 43's N_rt alone confirms).
+
+    Why: at SNR 1.2 a target tracked for 100 frames and more by a compact cloud can have MTW/MSW ≈ 0.03,
+    below the ICEF window's 0.05, so C shrinks by ICEF·SCEF = 0.9·1.1 per frame and never returns to 1;
+    a noise track's cloud spreads within a few tens of frames (docs/results/suite_analysis.md)."""
+    if window < 1 or len(held) < window:
+        return False
+    return all(compact for _, compact in held) and sum(r for r, _ in held) / window >= log_mean_ratio
 
 
 def scef(cov: np.ndarray, t_devr: float):
@@ -263,6 +280,7 @@ class SGDSPF:
                                           vmax=p.V_limit, intensity=intensity)
         self.icef_ratio = p.icef_ratio_for(self.shape[0] * self.shape[1])  # the ICEF window's threshold
         self.icef_lower = p.icef_ratio_for(self.shape[0] * self.shape[1], ICEF_LOWER)  # Eq. 40's 0.1, scaled
+        self.confirm_log_ratio = math.log(p.icef_ratio_for(self.shape[0] * self.shape[1], p.confirm_mean_ratio))
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
         self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
@@ -441,7 +459,8 @@ class SGDSPF:
             picks.append(start + resize_population(size, n_tpf, rng.random(max(n_tpf, size))))
             groups.append(self.free_groups.pop())
             track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
-                          log_ratios=deque(maxlen=self.p.icef_window))
+                          log_ratios=deque(maxlen=self.p.icef_window),
+                          held=deque(maxlen=max(self.p.confirm_window, 1)))
             self.next_track_id += 1
             track.path.append((f, x, y, float(mean["vx"][k]), float(mean["vy"][k]), float(mean["inten"][k]), 1.0))
             self.active.append(track)
@@ -494,6 +513,9 @@ class SGDSPF:
                 t.n_rt += 1
                 if t.n_rt > p.T_rt:
                     t.confirmed = True
+            t.held.append((log_r, scefs[g] > 1.0))
+            if not t.confirmed and held_compact(t.held, p.confirm_window, self.confirm_log_ratio):
+                t.confirmed = True
             if self._reportable(t, z) and t.path[-1][0] == f:
                 rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
         self._merge_duplicates()

@@ -36,6 +36,10 @@ def test_overrides_and_their_validation():
         SGDSParams.for_snr(2.0, icef_mean_ratio=0.0)
     with pytest.raises(ParameterError, match="icef_area_exponent = -0.5 must be ≥ 0"):
         SGDSParams.for_snr(2.0, icef_area_exponent=-0.5)
+    with pytest.raises(ParameterError, match="confirm_window = -1 must be an integer ≥ 0"):
+        SGDSParams.for_snr(2.0, confirm_window=-1)
+    with pytest.raises(ParameterError, match=r"confirm_mean_ratio = 0.0 must be in \(0, 1\]"):
+        SGDSParams.for_snr(2.0, confirm_mean_ratio=0.0)
     with pytest.raises(ParameterError, match=r"lef_memory = 1.0 must be in \[0, 1\)"):
         SGDSParams.for_snr(2.0, lef_memory=1.0)
     with pytest.raises(ParameterError, match="lef_scale = 0 must be > 0"):
