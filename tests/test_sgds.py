@@ -159,6 +159,9 @@ def test_icef_window_threshold_follows_the_frame_area():
     assert SGDSPF((50, 50), snr=1.2).icef_lower == pytest.approx(0.1 * 16 ** 0.45)  # 0.348
     assert p.icef_ratio_for(320 * 256, 0.1) == pytest.approx(0.1 * (40000 / 81920) ** 0.45)  # 0.072
     assert icef_of_log_ratio(math.log(0.2)) == 1.0 and icef_of_log_ratio(math.log(0.2), 0.348) == 0.9
+    # and so does the long confirmation window's mean ratio (0.03 at 200×200)
+    assert SGDSPF((200, 200), snr=1.2).confirm_log_ratio == pytest.approx(math.log(0.03))
+    assert SGDSPF((50, 50), snr=1.2).confirm_log_ratio == pytest.approx(math.log(0.03 * 16 ** 0.45))  # 0.104
 
 
 def test_area_scaled_icef_window_drops_a_small_frame_false_track():
