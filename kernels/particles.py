@@ -81,10 +81,9 @@ class ParticleKernels(PopulationKernels):
             f64(n_tiles), f64(n_tiles)
         self.tile_spc, self.tile_spc_prefix = f64(n_tiles), f64(n_tiles)
         self.tile_moments = f64(n_tiles, N_MOMENTS)
-        self.map_pixel, self.map_cdf = i32(map_capacity), f64(map_capacity)
+        self.map_pixel, self.map_seq, self.map_cdf = i32(map_capacity), i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
-        self.label = i32(*frame_shape)
         self.population_fields(c, frame_shape)
         self.normal, self.exponential = NormalTables(), ExponentialTables()
 
@@ -155,8 +154,8 @@ class ParticleKernels(PopulationKernels):
         self.for_slots(False, self.existence_rates, self.existence_step, (key_prefix(seed, frame, S_EXIST), b))
 
     @ti.func
-    def map_pixel_draw(self, g: ti.i32, v: ti.f64) -> ti.i32:
-        """First pixel of group g's proposal list whose cumulative weight exceeds v (binary search)."""
+    def map_entry_draw(self, g: ti.i32, v: ti.f64) -> ti.i32:
+        """First entry of group g's proposal list whose cumulative weight exceeds v (binary search)."""
         lo = self.map_off[g]
         hi = lo + self.map_n[g] - 1
         while lo < hi:
@@ -165,7 +164,7 @@ class ParticleKernels(PopulationKernels):
                 hi = mid
             else:
                 lo = mid + 1
-        return self.map_pixel[lo]
+        return lo
 
     @ti.func
     def store_counts(self, counts: ti.template()):
@@ -212,7 +211,7 @@ class ParticleKernels(PopulationKernels):
         """Step 2 for newborn (born = 1, E 0 → 1) and initial (born = 2) particles (Eq. 34).
 
         kind 0: position uniform over [bx0, bx1) × [by0, by1); kind 1: a pixel drawn from the
-        group's proposal map plus U(−½, ½) in x and y, and Seq from the label image (Eq. 36); with
+        group's proposal map plus U(−½, ½) in x and y, and Seq the PP label of that pixel (Eq. 36); with
         an empty map the particle cannot be placed and gets E = 0.  Speed U[0, vmax] in a uniform
         direction, intensity U[imin, imax], Tp = 1; initial particles draw E = [U < μ].
         kind 2 (tracking PFs): a copy of a random E = 1 particle of the same group (E = 0 if
@@ -249,10 +248,11 @@ class ParticleKernels(PopulationKernels):
                     self.x[b, i] = self.bx0[g] + (self.bx1[g] - self.bx0[g]) * ux
                     self.y[b, i] = self.by0[g] + (self.by1[g] - self.by0[g]) * uy
                 else:
-                    p = self.map_pixel_draw(g, uniform_f64_at(kp, i) * self.map_total[g])
+                    m = self.map_entry_draw(g, uniform_f64_at(kp, i) * self.map_total[g])
+                    p = self.map_pixel[m]
                     self.x[b, i] = ti.cast(p % width, ti.f32) + (ux - ti.f32(0.5))
                     self.y[b, i] = ti.cast(p // width, ti.f32) + (uy - ti.f32(0.5))
-                    self.seq[b, i] = self.label[p // width, p % width]
+                    self.seq[b, i] = self.map_seq[m]
                 speed = self.vmax[g] * uniform_at(ks, i)
                 angle = ti.f32(TWO_PI) * uniform_at(ka, i)
                 self.vx[b, i] = speed * ti.cos(angle)
@@ -692,14 +692,6 @@ class ParticleKernels(PopulationKernels):
             floats[3, k], floats[4, k], floats[5, k] = self.vy[b, i], self.inten[b, i], self.logw[i]
             ints[0, k], ints[1, k], ints[2, k] = self.e[b, i], self.tp[b, i], self.seq[b, i]
 
-    @ti.kernel
-    def load_labels(self, labels: ti.types.ndarray(dtype=ti.i32, ndim=2)):
-        """The PP label image that newborns drawn from a proposal map take their Seq from (Eq. 36)."""
-        ti.loop_config(serialize=self.serial)
-        for y in range(labels.shape[0]):
-            for x in range(labels.shape[1]):
-                self.label[y, x] = labels[y, x]
-
     @ti.func
     def gather(self, src: ti.i32):
         """Copy each output slot's parent state from buffer src into buffer 1 − src; weights reset (1/L)."""
@@ -748,8 +740,8 @@ class ParticleKernels(PopulationKernels):
     @ti.kernel
     def load_map(self, off: ti.types.ndarray(dtype=ti.i32, ndim=1), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
                  total: ti.types.ndarray(dtype=ti.f64, ndim=1), pixel: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                 cdf: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-        """The groups' proposal maps (pixel lists with f64 cumulative weights), in one launch."""
+                 seq: ti.types.ndarray(dtype=ti.i32, ndim=1), cdf: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        """The groups' proposal maps (pixel lists with their PP labels and f64 cumulative weights), in one launch."""
         ti.loop_config(serialize=True)
         for g in range(off.shape[0]):
             self.map_off[g] = off[g]
@@ -758,4 +750,5 @@ class ParticleKernels(PopulationKernels):
         ti.loop_config(serialize=self.serial)
         for k in range(pixel.shape[0]):
             self.map_pixel[k] = pixel[k]
+            self.map_seq[k] = seq[k]
             self.map_cdf[k] = cdf[k]

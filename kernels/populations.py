@@ -101,7 +101,7 @@ class PopulationKernels:
     def index_pixel(self, b: ti.i32, s: ti.i32, i: ti.i32) -> ti.i32:
         """Flat pixel y·W + x (nearest) of particle s in slot i if it is kept, has Seq > 0 and lies in
         the image (it takes part in the index image), else −1."""
-        h, w = ti.static(self.label.shape[0], self.label.shape[1])
+        h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
         x = ti.cast(ti.floor(self.x[b, i] + 0.5), ti.i32)
         y = ti.cast(ti.floor(self.y[b, i] + 0.5), ti.i32)
         ok = self.state_keep[s] != 0 and self.seq[b, i] > 0 and 0 <= x < w and 0 <= y < h
@@ -119,7 +119,7 @@ class PopulationKernels:
         P_pp (Eq. 36): each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the
         larger PP winning, then the later in state order; the kept particles move to the front of
         their slabs, and ``counts`` receives every group's new live count."""
-        h, w = ti.static(self.label.shape[0], self.label.shape[1])
+        h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
             self.pixel_key[y, x] = -1
@@ -138,7 +138,7 @@ class PopulationKernels:
         loop visits s in increasing order, so the last larger key wins at once; parallel loops
         take the atomic maximum and let :meth:`write_winner` write the Seq."""
         drop, index = ti.static(arrays)
-        w = ti.static(self.label.shape[1])
+        w = ti.static(self.pixel_key.shape[1])
         if drop[self.state_pp[s]] != 0:
             self.state_keep[s] = ti.i8(0)
         p = self.index_pixel(b, s, i)
@@ -155,7 +155,7 @@ class PopulationKernels:
     def write_winner(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
         """The particle that won its pixel writes its Seq there (parallel ``hand_over``)."""
         _, index = ti.static(arrays)
-        w = ti.static(self.label.shape[1])
+        w = ti.static(self.pixel_key.shape[1])
         p = self.index_pixel(b, s, i)
         if p >= 0 and self.pixel_key[p // w, p % w] == self.index_key(s):
             index[p // w, p % w] = self.seq[b, i]

@@ -133,7 +133,6 @@ class ParticlePool:
             else:
                 target.fill(0)
         self.set_proposal_map({})
-        self.load_labels(np.zeros(self.frame_shape, np.int32))
 
     # ------------------------------------------------------------ host ↔ engine
 
@@ -168,8 +167,10 @@ class ParticlePool:
         self.kinds[groups] = BIRTH_KINDS[kind]
         self._put("kind", self.kinds)
 
-    def set_proposal_map(self, per_group: dict) -> None:
-        """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64."""
+    def set_proposal_map(self, per_group: dict, labels: np.ndarray | None = None) -> None:
+        """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64.
+        A particle drawn from a pixel takes that pixel's PP label in ``labels`` (H, W) as its Seq (Eq. 36; 0
+        without labels)."""
         pixels, cdf = [], []
         off = np.zeros(self.n_groups, np.int32)
         count = np.zeros(self.n_groups, np.int32)
@@ -187,9 +188,13 @@ class ParticlePool:
             pos += len(pix)
         if pos > self.map_capacity:
             raise ParameterError(f"proposal maps hold {pos} pixels, more than the pool's map capacity {self.map_capacity}")
+        if labels is not None and np.shape(labels) != self.frame_shape:
+            raise ParameterError(f"labels must have the frame's shape {self.frame_shape}, got {np.shape(labels)}")
         full_pix = np.concatenate(pixels) if pixels else np.zeros(1, np.int32)
         full_cdf = np.concatenate(cdf) if cdf else np.zeros(1)
-        self.k.load_map(off, count, total, full_pix.astype(np.int32), full_cdf)
+        seq = np.zeros(len(full_pix), np.int32) if labels is None or not pixels else \
+            np.asarray(labels).reshape(-1)[full_pix].astype(np.int32)
+        self.k.load_map(off, count, total, full_pix.astype(np.int32), seq, full_cdf)
 
     def set_counts(self, counts) -> None:
         """Set the live particle count of every group (checked against its capacity)."""
@@ -207,10 +212,6 @@ class ParticlePool:
             raise ParameterError(f"group {g}: {what} {int(counts[g])} exceeds its capacity {int(self.caps[g])} "
                                  f"(or is negative); the pool is unchanged")
         return counts.astype(np.int32)
-
-    def load_labels(self, labels: np.ndarray) -> None:
-        """PP label image (H, W) int32 that map-drawn particles take their Seq from (Eq. 36)."""
-        self.k.load_labels(np.ascontiguousarray(labels, dtype=np.int32))
 
     def max_log_weights(self) -> np.ndarray:
         """Per group, the largest log-weight of an E = 1 particle in the last :meth:`weigh` (−3e38: none)."""

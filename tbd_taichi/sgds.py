@@ -391,8 +391,7 @@ class SGDSPF:
         proposal = self._suppress_tracked(front.proposal)
         support = proposal > 0
         maps = self._proposal_maps(proposal, support)
-        pool.set_proposal_map(maps)
-        pool.load_labels(self._labels(support))
+        pool.set_proposal_map(maps, self._labels(support))
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
         pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts))

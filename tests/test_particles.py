@@ -119,6 +119,29 @@ def test_newborn_uniform_and_from_map():
     expected = n * np.array([1, 2, 5]) / 8
     assert ((counts - expected) ** 2 / expected).sum() < 13.8
     assert np.all(np.abs(s["x"][g1] - np.floor(s["x"][g1] + 0.5)) <= 0.5)
+    assert np.all(s["seq"][g1] == 0)  # no labels given: Seq 0
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_map_newborns_take_their_pixels_pp_label(engine):
+    """Eq. 36: a particle drawn from a proposal pixel gets the label image's PP id at that pixel as its Seq;
+    a label image of another shape is refused."""
+    n, shape = 3000, (9, 13)
+    pool = ParticlePool([n], shape, engine=engine, seed=2, map_capacity=4)
+    pool.configure_groups([0], "map", pb=1.0, vmax=0.5, intensity=(2.0, 3.0))
+    pix = np.array([0, 4 * 13 + 7, 8 * 13 + 12])
+    labels = np.zeros(shape, np.int32)
+    labels.flat[pix] = [11, 12, 13]
+    pool.set_proposal_map({0: (pix, np.array([1.0, 1.0, 1.0]))}, labels)
+    zero = np.zeros(n)
+    pool.set_state({0: dict(x=zero, y=zero, vx=zero, vy=zero, inten=zero + 1, e=zero.astype(np.int32), tp=zero)})
+    pool.predict(0)
+    s = pool.state()
+    px = np.floor(s["x"] + 0.5).astype(int) + 13 * np.floor(s["y"] + 0.5).astype(int)
+    np.testing.assert_array_equal(s["seq"], labels.flat[px])
+    assert set(np.unique(s["seq"])) == {11, 12, 13}
+    with pytest.raises(ParameterError, match=r"labels must have the frame's shape \(9, 13\)"):
+        pool.set_proposal_map({0: (pix, np.ones(3))}, np.zeros((13, 9), np.int32))
 
 
 def test_propagation_reproduces_ncv_moments():

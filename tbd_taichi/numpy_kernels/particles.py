@@ -54,8 +54,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.tile_total, self.tile_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
         self.tile_spc, self.tile_spc_prefix = np.zeros(n_tiles), np.zeros(n_tiles)
         self.tile_moments = np.zeros((n_tiles, N_MOMENTS))
-        self.map_pixel, self.map_cdf = np.zeros(map_capacity, np.int32), np.zeros(map_capacity)
-        self.label = np.zeros(frame_shape, np.int32)
+        self.map_pixel, self.map_seq = np.zeros(map_capacity, np.int32), np.zeros(map_capacity, np.int32)
+        self.map_cdf = np.zeros(map_capacity)
 
     # ------------------------------------------------------------ helpers
 
@@ -81,13 +81,13 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.born[i] = ((e0 == 0) & (e1 == 1)).astype(np.int32)
         self.e[b, i] = e1
 
-    def map_pixel_draw(self, g: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def map_entry_draw(self, g: np.ndarray, v: np.ndarray) -> np.ndarray:
         out = np.empty(len(g), np.int64)
         for grp in np.unique(g):
             sel = g == grp
             lo, n = self.map_off[grp], self.map_n[grp]
             k = np.searchsorted(self.map_cdf[lo:lo + n], v[sel], side="right")
-            out[sel] = self.map_pixel[lo + np.minimum(k, n - 1)]
+            out[sel] = lo + np.minimum(k, n - 1)
         return out
 
     def store_counts(self, counts: np.ndarray) -> None:
@@ -123,10 +123,11 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         from_map = self.kind[g] == 1
         if from_map.any():
             v = rng.uniform_f64(seed, frame, S_BIRTH_PIXEL, i[from_map]) * self.map_total[g[from_map]]
-            p = self.map_pixel_draw(g[from_map], v)
+            m = self.map_entry_draw(g[from_map], v)
+            p = self.map_pixel[m].astype(np.int64)
             x[from_map] = (p % width).astype(F32) + (ux[from_map] - F32(0.5))
             y[from_map] = (p // width).astype(F32) + (uy[from_map] - F32(0.5))
-            self.seq[b, i[from_map]] = self.label[p // width, p % width]
+            self.seq[b, i[from_map]] = self.map_seq[m]
         speed = self.vmax[g] * rng.uniform(seed, frame, S_BIRTH_SPEED, i)
         angle = F32(TWO_PI) * rng.uniform(seed, frame, S_BIRTH_ANGLE, i)
         self.x[b, i], self.y[b, i] = x, y
@@ -333,9 +334,6 @@ class NumpyParticleKernels(NumpyPopulationKernels):
             out[:] = getattr(self, name)[b, slots]
         floats[5] = self.logw[slots]
 
-    def load_labels(self, labels: np.ndarray) -> None:
-        self.label[...] = labels
-
     def gather(self, src: int) -> None:
         dst = 1 - src
         for g in range(len(self.off)):
@@ -365,6 +363,6 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         for g in range(len(self.off)):
             moments[g] = self.tile_moments[self.gt0[g]:self.gt1[g]].sum(axis=0)
 
-    def load_map(self, off, count, total, pixel, cdf) -> None:
+    def load_map(self, off, count, total, pixel, seq, cdf) -> None:
         self.map_off[:], self.map_n[:], self.map_total[:] = off, count, total
-        self.map_pixel[:len(pixel)], self.map_cdf[:len(cdf)] = pixel, cdf
+        self.map_pixel[:len(pixel)], self.map_seq[:len(seq)], self.map_cdf[:len(cdf)] = pixel, seq, cdf
