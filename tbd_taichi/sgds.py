@@ -278,9 +278,10 @@ class SGDSPF:
                                      vmax=p.V_limit, intensity=intensity, mu=p.mu)
         self.tracks_pool.configure_groups(np.arange(max_tracks), "copy", pb=p.P_b, pd=p.P_d_track,
                                           vmax=p.V_limit, intensity=intensity)
-        self.icef_ratio = p.icef_ratio_for(self.shape[0] * self.shape[1])  # the ICEF window's threshold
-        self.icef_lower = p.icef_ratio_for(self.shape[0] * self.shape[1], ICEF_LOWER)  # Eq. 40's 0.1, scaled
-        self.confirm_log_ratio = math.log(p.icef_ratio_for(self.shape[0] * self.shape[1], p.confirm_mean_ratio))
+        pixels = self.shape[0] * self.shape[1]  # ICEF's thresholds scale with the frame area
+        self.icef_ratio = p.icef_ratio_for(pixels)  # the ICEF window's threshold
+        self.icef_lower = p.icef_ratio_for(pixels, ICEF_LOWER)  # Eq. 40's 0.1, scaled
+        self.confirm_log_ratio = math.log(p.icef_ratio_for(pixels, p.confirm_mean_ratio))  # the long window's
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
         self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
