@@ -183,10 +183,17 @@ def cpu_threads() -> int:
     return (cfg.threads if cfg is not None else None) or os.cpu_count() or 1
 
 
-def _transfer_kernel(direction: str, ndim: int):
-    from .kernels import transfer
+_transfers = None  # the transfer kernels, through tbd_taichi.launch
 
-    return getattr(transfer, f"{direction}_{ndim}d")
+
+def _transfer_kernel(direction: str, ndim: int):
+    global _transfers
+    if _transfers is None:
+        from .kernels import transfer
+        from .launch import Launcher
+
+        _transfers = Launcher(transfer)
+    return getattr(_transfers, f"{direction}_{ndim}d")
 
 
 def _scalar_field(obj) -> bool:

@@ -77,7 +77,10 @@ class Preprocessor:
             raise ParameterError(f"unknown background {background!r}; choose one of {', '.join(BACKGROUNDS)}")
         if engine == "taichi":
             backend.ensure_init()
-            from .kernels import background as k
+            from .kernels import background as kernels
+            from .launch import Launcher
+
+            k = Launcher(kernels)
         elif engine == "numpy":
             from .numpy_kernels import background as k
         else:

@@ -106,8 +106,12 @@ class ParticlePool:
         else:
             from .numpy_kernels.particles import NumpyParticleKernels as Kernels
         dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat)
-        self.k = backend.reusable(self, ("particles",) + dims, lambda: Kernels(*dims)) if engine == "taichi" \
-            else Kernels(*dims)
+        if engine == "taichi":
+            from .launch import Launcher
+
+            self.k = Launcher(backend.reusable(self, ("particles",) + dims, lambda: Kernels(*dims)))
+        else:
+            self.k = Kernels(*dims)
         slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)
         self._put("slot_group", slot_group)
         self._put("off", self.off)

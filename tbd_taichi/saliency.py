@@ -193,8 +193,10 @@ class TaichiSaliencyEngine:
 
     def __init__(self, shape, grid: BlockGrid, d: np.ndarray, window: int, lef_memory: float = 0.0,
                  lef_scale: float = 1.0):
-        from .kernels import saliency as ks
+        from .kernels import saliency
+        from .launch import Launcher
 
+        ks = Launcher(saliency)
         self.ks, self.grid, self.r = ks, grid, window
         self.lef_memory, self.lef_scale = lef_memory, lef_scale
         self.memory_slot = 0  # slot of memory holding the last emitted frame's multi-frame LEF

@@ -1,0 +1,134 @@
+"""A lean launch path for Taichi kernels that run every frame.
+
+Taichi 1.7's Python launch (``Kernel.__call__``) costs 50–200 µs per call on this project's 2-core
+CPU, whatever the kernel's work: it rebuilds the template key of every argument, looks the compiled
+kernel up through ``prog.compile_kernel`` and sets each NumPy argument through several checks.  At
+21 launches per frame that was about 2.6 of the 12–14 ms of ``SGDSPF.update`` at 320×256.
+
+``Launcher(target)`` wraps a kernels module or a ``@ti.data_oriented`` object: its kernels, looked
+up as attributes, are ``FastKernel`` objects.  A ``FastKernel`` makes its first call with each
+argument signature through Taichi itself (which compiles and checks everything), keeps the
+compiled kernel, and launches later calls with the same signature directly: a launch context, one
+setter call per argument and ``prog.launch_kernel``, the same C++ calls Taichi's own path ends in
+(about 10 µs).  Anything the lean path does not handle goes through Taichi: keyword arguments,
+kernels with a return value or ``print``, debug mode, and arguments other than NumPy C-contiguous
+arrays, Python/NumPy scalars and template values.  Every other attribute is the target's own.
+"""
+from __future__ import annotations
+
+import numpy as np
+from taichi.lang import impl
+from taichi.lang.kernel_impl import _BoundedDifferentiableMethod
+from taichi.types import ndarray_type, primitive_types, template
+from taichi.lang.util import cook_dtype
+from taichi.types.utils import is_signed
+
+SCALAR_KEYS = (bool, int, float, str)  # template values that key a compiled kernel by value
+INTS = (int, np.integer)
+FLOATS = (float, int, np.floating, np.integer)
+
+
+def argument_kinds(kernel, skip: int) -> tuple:
+    """Per kernel argument after the first ``skip`` (the data-oriented owner): "t" template, "a" array
+    (with its element dimensions), "f" float, "i" signed or "u" unsigned integer; None when an argument
+    has another type (such kernels always launch through Taichi)."""
+    kinds = []
+    for arg in kernel.arguments[skip:]:
+        ann = arg.annotation
+        if isinstance(ann, template):
+            kinds.append(("t", 0))
+        elif isinstance(ann, ndarray_type.NdarrayType):
+            scalar = ann.dtype is None or id(ann.dtype) in primitive_types.type_ids
+            kinds.append(("a", 0 if scalar else ann.dtype.ndim))
+        elif id(ann) in primitive_types.real_type_ids:
+            kinds.append(("f", 0))
+        elif id(ann) in primitive_types.integer_type_ids:
+            kinds.append(("i" if is_signed(cook_dtype(ann)) else "u", 0))
+        else:
+            return None
+    return tuple(kinds)
+
+
+def signature_key(kinds: tuple, args: tuple):
+    """What decides the compiled kernel and the lean path's setters: template values (by value for
+    scalars, else by identity), array dtype and rank, scalar types; None when an argument needs
+    Taichi's own handling."""
+    key = []
+    for (kind, _), v in zip(kinds, args):
+        if kind == "t":
+            key.append((type(v), v) if type(v) in SCALAR_KEYS else id(v))
+        elif kind == "a":
+            if type(v) is not np.ndarray or not v.flags.c_contiguous:
+                return None
+            key.append((v.dtype.num, v.ndim))
+        elif not isinstance(v, INTS if kind in "iu" else FLOATS):
+            return None
+    return tuple(key) if len(args) == len(kinds) else None
+
+
+class FastKernel:
+    """One kernel (``kernel``: Taichi's ``Kernel``; ``owner``: its data-oriented object, or None)
+    called like the kernel itself."""
+
+    def __init__(self, kernel, owner=None):
+        self.kernel, self.lead = kernel, (() if owner is None else (owner,))
+        self.kinds = None if kernel.return_type is not None else argument_kinds(kernel, len(self.lead))
+        self.compiled = {}  # signature key → (program, kernel's C++ object, compiled data, template args kept alive)
+
+    def __call__(self, *args, **kwargs):
+        key = None if kwargs or self.kinds is None else signature_key(self.kinds, args)
+        runtime = impl.get_runtime()
+        entry = self.compiled.get(key) if key is not None else None
+        if entry is None or entry[0] is not runtime.prog or runtime.prog.config().debug:
+            return self._through_taichi(key, runtime, args, kwargs)
+        prog, kernel_cpp, data, _ = entry
+        runtime.materialize()  # fields made since the last launch (as Taichi's launch does)
+        ctx = kernel_cpp.make_launch_context()
+        slot = 0
+        for (kind, element_dims), v in zip(self.kinds, args):
+            if kind == "t":
+                continue
+            if kind == "a":
+                shape = v.shape[: v.ndim - element_dims]
+                ctx.set_arg_external_array_with_shape((slot,), v.__array_interface__["data"][0], v.nbytes, shape, 0)
+            elif kind == "f":
+                ctx.set_arg_float((slot,), float(v))
+            elif kind == "i":
+                ctx.set_arg_int((slot,), int(v))
+            else:
+                ctx.set_arg_uint((slot,), int(v))
+            slot += 1
+        prog.launch_kernel(data, ctx)
+        return None
+
+    def _through_taichi(self, key, runtime, args, kwargs):
+        """Taichi's own launch (it compiles and checks); then keep the compiled kernel for ``key``."""
+        out = self.kernel(*self.lead, *args, **kwargs)
+        if key is not None and not self.kernel.has_print:  # known once compiled
+            kernel_cpp = self.kernel.compiled_kernels[self.kernel.ensure_compiled(*self.lead, *args)]
+            prog = runtime.prog
+            data = prog.compile_kernel(prog.config(), prog.get_device_caps(), kernel_cpp)
+            templates = tuple(v for (kind, _), v in zip(self.kinds, args) if kind == "t")
+            self.compiled[key] = (prog, kernel_cpp, data, templates)
+        return out
+
+
+class Launcher:
+    """``target``'s attributes, with its Taichi kernels as :class:`FastKernel` objects (made once)."""
+
+    def __init__(self, target):
+        object.__setattr__(self, "_target", target)
+
+    def __getattr__(self, name):
+        value = getattr(self._target, name)
+        if isinstance(value, _BoundedDifferentiableMethod) and not value._is_staticmethod:
+            fast = FastKernel(value._primal, value._kernel_owner)
+        elif getattr(value, "_is_wrapped_kernel", False) and not getattr(value, "_is_classkernel", True):
+            fast = FastKernel(value._primal)
+        else:
+            return value
+        object.__setattr__(self, name, fast)  # later lookups skip __getattr__
+        return fast
+
+    def __setattr__(self, name, value):
+        setattr(self._target, name, value)

@@ -1,0 +1,174 @@
+"""The lean kernel launch (tbd_taichi.launch): the same results as Taichi's own launch for every
+argument kind, Taichi's path for what it does not handle, and recompilation after a restart."""
+import types
+
+import numpy as np
+import pytest
+import taichi as ti
+
+import tbd_taichi
+from tbd_taichi import backend, launch
+from conftest import TEST_ARCH
+
+VEC3 = ti.types.vector(3, ti.f32)
+
+
+@ti.kernel
+def mixed(a: ti.i32, u: ti.u32, x: ti.f32, d: ti.f64, src: ti.types.ndarray(dtype=ti.f32, ndim=2),
+          vec: ti.types.ndarray(dtype=VEC3, ndim=1), table: ti.template(), flag: ti.template(),
+          out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    for i in range(out.shape[0]):
+        s = ti.cast(0.0, ti.f64)
+        for j in range(src.shape[1]):
+            s += ti.cast(src[i, j], ti.f64) * (j + 1)
+        v = vec[i]
+        s += ti.cast(v[0] - 2 * v[1] + 3 * v[2], ti.f64) + ti.cast(table[i], ti.f64)
+        if ti.static(flag):
+            s = -s
+        out[i] = s + a * 1000 + ti.cast(u, ti.f64) * 0.5 + ti.cast(x, ti.f64) * 0.25 + d
+
+
+@ti.kernel
+def add_into(src: ti.types.ndarray(ndim=1), dst: ti.types.ndarray(ndim=1)):
+    for i in range(src.shape[0]):
+        dst[i] += src[i]
+
+
+@ti.kernel
+def total(src: ti.types.ndarray(dtype=ti.f32, ndim=1)) -> ti.f32:
+    s = ti.f32(0.0)
+    for i in range(src.shape[0]):
+        s += src[i]
+    return s
+
+
+@ti.data_oriented
+class Scaled:
+    def __init__(self, n):
+        self.values = ti.field(ti.f32, shape=n)
+        self.factor = 3.0
+
+    @ti.kernel
+    def scale(self, factor: ti.f32, src: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(src.shape[0]):
+            self.values[i] = factor * src[i]
+
+
+def reference(a, u, x, d, src, vec, table, flag):
+    """``mixed`` in NumPy (f64, the kernel's f32 inputs converted exactly)."""
+    s = (src.astype(np.float64) * np.arange(1, src.shape[1] + 1)).sum(axis=1)
+    s += (vec[:, 0] - 2 * vec[:, 1] + 3 * vec[:, 2]).astype(np.float32).astype(np.float64) + table
+    return (-s if flag else s) + a * 1000 + u * 0.5 + np.float64(np.float32(x)) * 0.25 + d
+
+
+@pytest.fixture
+def taichi_calls(monkeypatch):
+    """How many launches went through Taichi's own path."""
+    calls = []
+    original = launch.FastKernel._through_taichi
+
+    def counted(self, *args):
+        calls.append(self.kernel.func.__name__)
+        return original(self, *args)
+
+    monkeypatch.setattr(launch.FastKernel, "_through_taichi", counted)
+    return calls
+
+
+def mixed_inputs(rng, n=37, m=5):
+    table = ti.field(ti.f32, shape=n)
+    table.from_numpy(rng.normal(size=n).astype(np.float32))
+    src = rng.normal(size=(n, m)).astype(np.float32)
+    vec = rng.normal(size=(n, 3)).astype(np.float32)
+    return src, vec, table
+
+
+def test_lean_launch_gives_taichis_results_for_every_argument_kind(rng, taichi_calls):
+    kernels = launch.Launcher(types.SimpleNamespace(mixed=mixed))
+    src, vec, table = mixed_inputs(rng)
+    out = np.empty(len(src))
+    for k, (a, u, x, d, flag) in enumerate([(3, 7, 1.5, -2.25, False), (-4, 2**32 - 1, -0.1, 1e10, False),
+                                            (0, 0, 3.3, 0.0, True), (9, 5, 2.0, 0.5, True)]):
+        out[:] = np.nan
+        kernels.mixed(a, u, x, d, src, vec, table, flag, out)
+        expected = np.empty_like(out)
+        mixed(a, u, x, d, src, vec, table, flag, expected)
+        np.testing.assert_array_equal(out, expected)
+        np.testing.assert_allclose(out, reference(a, u, x, d, src, vec, table.to_numpy(), flag), rtol=1e-6)
+        src += 1  # new values each call: the lean path reads the arrays it is given
+    # one Taichi launch per template value (flag False, flag True); the other two were lean
+    assert taichi_calls == ["mixed", "mixed"]
+    assert len(kernels.mixed.compiled) == 2
+
+
+def test_new_array_dtype_compiles_again_and_each_stays_right(taichi_calls):
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    for dtype in (np.float32, np.int32, np.float32, np.float64, np.int32):
+        src, dst = np.arange(11, dtype=dtype), np.ones(11, dtype=dtype)
+        kernels.add_into(src, dst)
+        np.testing.assert_array_equal(dst, np.arange(11, dtype=dtype) + 1)
+    assert taichi_calls == ["add_into"] * 3  # f32, i32, f64 once each
+
+
+def test_what_the_lean_path_does_not_handle_goes_through_taichi(rng, taichi_calls):
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into, total=total, mixed=mixed))
+    src = np.arange(12, dtype=np.float32)
+    dst = np.zeros(12, np.float32)
+    kernels.add_into(src, dst)
+    kernels.add_into(src=src, dst=dst)  # keywords
+    np.testing.assert_array_equal(dst, 2 * src)
+    assert kernels.total(src) == pytest.approx(66.0)  # a return value
+    assert kernels.total(src) == pytest.approx(66.0)
+    image, vec, table = mixed_inputs(rng)
+    out_c, out_f = np.empty(len(image)), np.empty(len(image))
+    kernels.mixed(1, 2, 0.5, 0.25, image, vec, table, False, out_c)
+    kernels.mixed(1, 2, 0.5, 0.25, np.asfortranarray(image), vec, table, False, out_f)  # Taichi copies it
+    np.testing.assert_array_equal(out_f, out_c)
+    assert taichi_calls == ["add_into", "add_into", "total", "total", "mixed", "mixed"]
+
+
+def test_non_contiguous_array_is_taichis_error_not_a_wrong_result():
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    src = np.arange(10, dtype=np.float32)
+    kernels.add_into(src, np.zeros(10, np.float32))  # compiled, so the next call could be lean
+    with pytest.raises(ValueError, match="Non contiguous"):
+        kernels.add_into(src[::2].copy(), np.zeros(20, np.float32)[::2])
+
+
+def test_wrong_dtype_is_taichis_error():
+    kernels = launch.Launcher(types.SimpleNamespace(mixed=mixed))
+    src, vec, table = mixed_inputs(np.random.default_rng(1), n=4)
+    kernels.mixed(1, 1, 1.0, 1.0, src, vec, table, False, np.empty(4))
+    with pytest.raises(ValueError, match="dtype"):
+        kernels.mixed(1, 1, 1.0, 1.0, src.astype(np.float64), vec, table, False, np.empty(4))
+    with pytest.raises(Exception, match="cannot be converted|int"):
+        kernels.mixed(1.5, 1, 1.0, 1.0, src, vec, table, False, np.empty(4))  # a float for an i32
+
+
+def test_data_oriented_kernels_and_attributes(taichi_calls):
+    obj = Scaled(9)
+    kernels = launch.Launcher(obj)
+    src = np.linspace(-1, 1, 9).astype(np.float32)
+    for factor in (2.0, -0.5):
+        kernels.scale(factor, src)
+        np.testing.assert_array_equal(kernels.values.to_numpy(), np.float32(factor) * src)
+    assert kernels.factor == 3.0
+    kernels.factor = 4.0  # attributes are the target's own
+    assert obj.factor == 4.0
+    assert taichi_calls == ["scale"]
+
+
+def test_runtime_restart_recompiles():
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    src = np.arange(5, dtype=np.float32)
+    dst = np.zeros(5, np.float32)
+    kernels.add_into(src, dst)
+    try:
+        tbd_taichi.init("cpu", threads=1)
+        kernels.add_into(src, dst)
+        kernels.add_into(src, dst)
+    finally:
+        tbd_taichi.init(TEST_ARCH)
+    kernels.add_into(src, dst)
+    np.testing.assert_array_equal(dst, 4 * src)
+    assert backend.current().arch == TEST_ARCH
