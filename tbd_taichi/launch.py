@@ -13,10 +13,15 @@ setter call per argument and ``prog.launch_kernel``, the same C++ calls Taichi's
 (about 10 µs).  Anything the lean path does not handle goes through Taichi: keyword arguments,
 kernels with a return value or ``print``, debug mode, and arguments other than NumPy C-contiguous
 arrays, Python/NumPy scalars and template values.  Every other attribute is the target's own.
+
+The lean path runs on the CPU backends only (``LEAN_ARCHS``).  On a GPU the same C++ calls would also
+copy host arrays to the device and back, but that has not been tested on a device yet, so GPU
+backends keep Taichi's own launch.
 """
 from __future__ import annotations
 
 import numpy as np
+import taichi as ti
 from taichi.lang import impl
 from taichi.lang.kernel_impl import _BoundedDifferentiableMethod
 from taichi.types import ndarray_type, primitive_types, template
@@ -26,6 +31,8 @@ from taichi.types.utils import is_signed
 SCALAR_KEYS = (bool, int, float, str)  # template values that key a compiled kernel by value
 INTS = (int, np.integer)
 FLOATS = (float, int, np.floating, np.integer)
+MAX_SIGNATURES = 16  # compiled signatures kept per kernel (a caller passing fresh objects as templates adds one per call)
+LEAN_ARCHS = (ti.x64, ti.arm64)  # the CPU backends; GPU backends launch through Taichi (module notes)
 
 
 def argument_kinds(kernel, skip: int) -> tuple:
@@ -104,13 +111,20 @@ class FastKernel:
     def _through_taichi(self, key, runtime, args, kwargs):
         """Taichi's own launch (it compiles and checks); then keep the compiled kernel for ``key``."""
         out = self.kernel(*self.lead, *args, **kwargs)
-        if key is not None and not self.kernel.has_print:  # known once compiled
+        if key is not None and self._keeps(runtime):
             kernel_cpp = self.kernel.compiled_kernels[self.kernel.ensure_compiled(*self.lead, *args)]
             prog = runtime.prog
             data = prog.compile_kernel(prog.config(), prog.get_device_caps(), kernel_cpp)
             templates = tuple(v for (kind, _), v in zip(self.kinds, args) if kind == "t")
             self.compiled[key] = (prog, kernel_cpp, data, templates)
         return out
+
+
+    def _keeps(self, runtime) -> bool:
+        """Whether a compiled kernel is kept for the lean path: no ``print`` (known once compiled), a CPU
+        backend, and room for another signature."""
+        return (not self.kernel.has_print and runtime.prog.config().arch in LEAN_ARCHS
+                and len(self.compiled) < MAX_SIGNATURES)
 
 
 class Launcher:

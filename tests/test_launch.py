@@ -172,3 +172,22 @@ def test_runtime_restart_recompiles():
     kernels.add_into(src, dst)
     np.testing.assert_array_equal(dst, 4 * src)
     assert backend.current().arch == TEST_ARCH
+
+
+def test_gpu_backends_and_fresh_template_objects_keep_taichis_launch(monkeypatch, taichi_calls):
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into, mixed=mixed))
+    src, dst = np.arange(6, dtype=np.float32), np.zeros(6, np.float32)
+    monkeypatch.setattr(launch, "LEAN_ARCHS", ())  # as on CUDA, Vulkan or Metal
+    for _ in range(3):
+        kernels.add_into(src, dst)
+    np.testing.assert_array_equal(dst, 3 * src)
+    assert taichi_calls == ["add_into"] * 3 and not kernels.add_into.compiled
+    monkeypatch.undo()
+    image, vec, _ = mixed_inputs(np.random.default_rng(2), n=3)
+    out = np.empty(3)
+    for k in range(launch.MAX_SIGNATURES + 4):  # a new field (template) each call: a new signature each call
+        table = ti.field(ti.f32, shape=3)
+        table.fill(k)
+        kernels.mixed(0, 0, 0.0, 0.0, image, vec, table, False, out)
+        np.testing.assert_allclose(out, reference(0, 0, 0.0, 0.0, image, vec, np.full(3, k), False), rtol=1e-6)
+    assert len(kernels.mixed.compiled) == launch.MAX_SIGNATURES
