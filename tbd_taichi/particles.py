@@ -65,6 +65,16 @@ class GroupEstimates:
     max_logw: np.ndarray  # largest log-weight of an E = 1 particle in the last step
 
 
+def covariance_from_means(means: np.ndarray) -> np.ndarray:
+    """(G, 2, 2) covariances of (x, y) from the columns E[x], E[y], E[x²], E[y²], E[xy] of ``means`` (G, 5)."""
+    mx, my, mxx, myy, mxy = means.T
+    cov = np.empty((len(means), 2, 2))
+    cov[:, 0, 0] = mxx - mx * mx
+    cov[:, 1, 1] = myy - my * my
+    cov[:, 0, 1] = cov[:, 1, 0] = mxy - mx * my
+    return cov
+
+
 class ParticlePool:
     """A pool of ``len(capacities)`` particle filters with fixed capacities.
 
@@ -438,17 +448,10 @@ class ParticlePool:
         m = np.empty((self.n_groups, N_MOMENTS))
         self.k.estimates(self.buf, m)
         n, ne = m[:, M_N], m[:, M_E]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = lambda col, d: np.where(d > 0, m[:, col] / d, np.nan)  # noqa: E731
-
-            def covariance(xx, yy, xy, x, y, d):
-                mx, my = mean(x, d), mean(y, d)
-                cov = np.empty((self.n_groups, 2, 2))
-                cov[:, 0, 0] = mean(xx, d) - mx * mx
-                cov[:, 1, 1] = mean(yy, d) - my * my
-                cov[:, 0, 1] = cov[:, 1, 0] = mean(xy, d) - mx * my
-                return cov
-            return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), mean(M_EX, ne),
-                                  mean(M_EVX, ne), mean(M_EY, ne), mean(M_EVY, ne), mean(M_EI, ne), mean(M_TP, n),
-                                  covariance(M_XX, M_YY, M_XY, M_X, M_Y, n),
-                                  covariance(M_EXX, M_EYY, M_EXY, M_EX, M_EY, ne), self.max_log_weights())
+        with np.errstate(invalid="ignore", divide="ignore"):  # the means, NaN where their count is 0
+            every = np.where(n[:, None] > 0, m[:, [M_TP, M_X, M_Y, M_XX, M_YY, M_XY]] / n[:, None], np.nan)
+            live = np.where(ne[:, None] > 0, m[:, [M_EX, M_EVX, M_EY, M_EVY, M_EI, M_EXX, M_EYY, M_EXY]] / ne[:, None],
+                            np.nan)
+        return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), *live[:, :5].T,
+                              every[:, 0], covariance_from_means(every[:, 1:]),
+                              covariance_from_means(live[:, [0, 2, 5, 6, 7]]), self.max_log_weights())

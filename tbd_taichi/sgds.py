@@ -213,11 +213,12 @@ def populations(group: np.ndarray, seq: np.ndarray, table_limit: int = 1 << 22):
         keys, code = np.unique(np.asarray(group, np.int64) * span + (seq.astype(np.int64) - lo), return_inverse=True)
         return keys // span, code.reshape(-1), np.bincount(code.reshape(-1), minlength=len(keys))
     key = (seq - lo).astype(np.int32)
-    key += (np.asarray(group) * span).astype(np.int32)  # block-major key
+    key += (np.asarray(group) * span).astype(np.int32, copy=False)  # block-major key (int32: ≤ table_limit)
     table = np.bincount(key, minlength=n_groups * span)
-    present = table > 0
-    keys = np.flatnonzero(present)
-    return keys // span, np.take(np.cumsum(present, dtype=np.int32), key) - 1, table[keys]
+    keys = np.flatnonzero(table)
+    index = np.empty(len(table), np.int32)  # PP index of each present key (every particle's key is present)
+    index[keys] = np.arange(len(keys), dtype=np.int32)
+    return keys // span, np.take(index, key), table[keys]
 
 
 def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:
@@ -412,7 +413,7 @@ class SGDSPF:
         from .kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 
         p, pool = self.p, self.search
-        group = np.repeat(np.arange(pool.n_groups), pool.counts)
+        group = np.repeat(np.arange(pool.n_groups, dtype=np.int32), pool.counts)
         pp_block, inverse, counts = populations(group, pool.seq_in_state_order(out=self._seq))
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
