@@ -356,15 +356,13 @@ class SGDSPF:
         return rows
 
     def _suppress_tracked(self, proposal: np.ndarray) -> np.ndarray:
-        """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track)."""
-        if not self.active:
-            return proposal
-        prop = proposal.copy()
+        """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track),
+        in place: ``proposal`` is the front frame's own copy, used for this frame's search only."""
         r = TRACK_MASK_HALF
         for t in self.active:
             cx, cy = nearest_pixel(*t.last_xy())
-            prop[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
-        return prop
+            proposal[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
+        return proposal
 
     def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
         """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
