@@ -86,7 +86,7 @@ class FastKernel:
         key = None if kwargs or self.kinds is None else signature_key(self.kinds, args)
         runtime = impl.get_runtime()
         entry = self.compiled.get(key) if key is not None else None
-        if entry is None or entry[0] is not runtime.prog or runtime.prog.config().debug:
+        if entry is None or entry[0] is not runtime.prog:
             return self._through_taichi(key, runtime, args, kwargs)
         prog, kernel_cpp, data, _ = entry
         runtime.materialize()  # fields made since the last launch (as Taichi's launch does)
@@ -122,8 +122,10 @@ class FastKernel:
 
     def _keeps(self, runtime) -> bool:
         """Whether a compiled kernel is kept for the lean path: no ``print`` (known once compiled), a CPU
-        backend, and room for another signature."""
-        return (not self.kernel.has_print and runtime.prog.config().arch in LEAN_ARCHS
+        backend out of debug mode (both fixed for the program, which every lean call checks is the same),
+        and room for another signature."""
+        config = runtime.prog.config()
+        return (not self.kernel.has_print and config.arch in LEAN_ARCHS and not config.debug
                 and len(self.compiled) < MAX_SIGNATURES)
 
 

@@ -355,14 +355,13 @@ class SGDSPF:
             self.online_rows += rows
         return rows
 
-    def _suppress_tracked(self, proposal: np.ndarray) -> np.ndarray:
+    def _suppress_tracked(self, proposal: np.ndarray) -> None:
         """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track),
         in place: ``proposal`` is the front frame's own copy, used for this frame's search only."""
         r = TRACK_MASK_HALF
         for t in self.active:
             cx, cy = nearest_pixel(*t.last_xy())
             proposal[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
-        return proposal
 
     def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
         """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
@@ -388,7 +387,8 @@ class SGDSPF:
     def _search_step(self, f: int, z: np.ndarray, front: FrontFrame) -> float:
         """Algorithm 1 on frame f; returns ln MSW for Eq. 40 (``msw_reference``)."""
         p, pool, grid = self.p, self.search, self.grid
-        proposal = self._suppress_tracked(front.proposal)
+        proposal = front.proposal
+        self._suppress_tracked(proposal)
         support = proposal > 0
         maps = self._proposal_maps(proposal, support)
         pool.set_proposal_map(maps, self._labels(support))

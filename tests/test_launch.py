@@ -191,3 +191,17 @@ def test_gpu_backends_and_fresh_template_objects_keep_taichis_launch(monkeypatch
         kernels.mixed(0, 0, 0.0, 0.0, image, vec, table, False, out)
         np.testing.assert_allclose(out, reference(0, 0, 0.0, 0.0, image, vec, np.full(3, k), False), rtol=1e-6)
     assert len(kernels.mixed.compiled) == launch.MAX_SIGNATURES
+
+
+def test_debug_mode_keeps_taichis_launch(taichi_calls):
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    src = np.arange(7, dtype=np.float32)
+    dst = np.zeros(7, np.float32)
+    try:
+        tbd_taichi.init("cpu", debug=True)
+        for _ in range(3):
+            kernels.add_into(src, dst)
+    finally:
+        tbd_taichi.init(TEST_ARCH)
+    np.testing.assert_array_equal(dst, 3 * src)
+    assert taichi_calls == ["add_into"] * 3 and not kernels.add_into.compiled
