@@ -56,21 +56,40 @@ def argument_kinds(kernel, skip: int) -> tuple:
     return tuple(kinds)
 
 
-def signature_key(kinds: tuple, args: tuple):
-    """What decides the compiled kernel and the lean path's setters: template values (by value for
-    scalars, else by identity), array dtype and rank, scalar types; None when an argument needs
-    Taichi's own handling."""
-    key = []
-    for (kind, _), v in zip(kinds, args):
+def lean_arguments(kinds: tuple, args: tuple):
+    """(key, values) of a call the lean path can launch, else (None, None).  ``key`` decides the compiled
+    kernel and the setters: template values (by value for scalars, else by identity), array dtype and
+    rank, scalar types.  ``values``: per non-template argument, (shape without element dimensions,
+    address, bytes) for an array, else the scalar.  An array's ``__array_interface__`` gives its
+    address, dtype and shape at once, and strides None exactly when it is C-contiguous."""
+    if len(args) != len(kinds):
+        return None, None
+    key, values = [], []
+    for (kind, element_dims), v in zip(kinds, args):
         if kind == "t":
             key.append((type(v), v) if type(v) in SCALAR_KEYS else id(v))
         elif kind == "a":
-            if type(v) is not np.ndarray or not v.flags.c_contiguous:
-                return None
-            key.append((v.dtype.num, v.ndim))
-        elif not isinstance(v, INTS if kind in "iu" else FLOATS):
-            return None
-    return tuple(key) if len(args) == len(kinds) else None
+            if type(v) is not np.ndarray:
+                return None, None
+            face = v.__array_interface__
+            typestr, shape = face["typestr"], face["shape"]
+            if face["strides"] is not None or typestr[0] == ">":  # not C-contiguous, or big-endian
+                return None, None
+            key.append((typestr, len(shape)))
+            values.append((shape[: len(shape) - element_dims] if element_dims else shape, face["data"][0], v.nbytes))
+        elif isinstance(v, INTS if kind in "iu" else FLOATS):
+            values.append(v)
+        else:
+            return None, None
+    return tuple(key), values
+
+
+def fields_unchanged(runtime) -> bool:
+    """No field made, and no fields builder opened, since the last launch: then Taichi's
+    ``materialize`` (which every launch calls) would do nothing."""
+    builders = runtime.unfinalized_fields_builder
+    return (runtime.materialized and not runtime.global_vars and not runtime.matrix_fields and not runtime.grad_vars
+            and not runtime.dual_vars and (not builders or (len(builders) == 1 and impl._root_fb in builders)))
 
 
 class FastKernel:
@@ -80,31 +99,29 @@ class FastKernel:
     def __init__(self, kernel, owner=None):
         self.kernel, self.lead = kernel, (() if owner is None else (owner,))
         self.kinds = None if kernel.return_type is not None else argument_kinds(kernel, len(self.lead))
+        self.value_kinds = tuple(kind for kind, _ in self.kinds or () if kind != "t")  # the non-template arguments
         self.compiled = {}  # signature key → (program, kernel's C++ object, compiled data, template args kept alive)
 
     def __call__(self, *args, **kwargs):
-        key = None if kwargs or self.kinds is None else signature_key(self.kinds, args)
+        key, values = (None, None) if kwargs or self.kinds is None else lean_arguments(self.kinds, args)
         runtime = impl.get_runtime()
         entry = self.compiled.get(key) if key is not None else None
         if entry is None or entry[0] is not runtime.prog:
             return self._through_taichi(key, runtime, args, kwargs)
         prog, kernel_cpp, data, _ = entry
-        runtime.materialize()  # fields made since the last launch (as Taichi's launch does)
+        if not fields_unchanged(runtime):
+            runtime.materialize()  # fields made since the last launch (as Taichi's launch does)
         ctx = kernel_cpp.make_launch_context()
-        slot = 0
-        for (kind, element_dims), v in zip(self.kinds, args):
-            if kind == "t":
-                continue
+        for slot, (kind, v) in enumerate(zip(self.value_kinds, values)):
             if kind == "a":
-                shape = v.shape[: v.ndim - element_dims]
-                ctx.set_arg_external_array_with_shape((slot,), v.__array_interface__["data"][0], v.nbytes, shape, 0)
+                shape, address, nbytes = v
+                ctx.set_arg_external_array_with_shape((slot,), address, nbytes, shape, 0)
             elif kind == "f":
                 ctx.set_arg_float((slot,), float(v))
             elif kind == "i":
                 ctx.set_arg_int((slot,), int(v))
             else:
                 ctx.set_arg_uint((slot,), int(v))
-            slot += 1
         prog.launch_kernel(data, ctx)
         return None
 
