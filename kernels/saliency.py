@@ -253,9 +253,9 @@ def accumulate_max(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: 
                 column_max(ring, c, y - r, h, acc_max, ds, valid, r)
 
 
-@ti.kernel
-def accumulate_moments(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, dst: ti.template(),
-                       rows: ti.template(), serial: ti.template()):
+@ti.func
+def second_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, dst: ti.template(),
+                     rows: ti.template(), serial: ti.template()):
     """Second layer of Eq. 22: I_acc2 = (Σ of 3 I_acc_max slots)·scale, with per-row (Σ v, Σ v²) in f64.
 
     Padding lanes of I_acc_max are 0, so they add nothing to the sums.
@@ -271,6 +271,13 @@ def accumulate_moments(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scal
         store_row_moments(rows, 0, y, s1, s2)
 
 
+@ti.kernel
+def accumulate_moments(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, dst: ti.template(),
+                       rows: ti.template(), serial: ti.template()):
+    """One launch of :func:`second_layer_sum`."""
+    second_layer_sum(src, a, b, c, scale, dst, rows, serial)
+
+
 @ti.func
 def mean_std(rows: ti.template(), s: ti.i32, count: ti.f64) -> ti.types.vector(2, ti.f64):
     """(mean, N−1 std as MATLAB's std2) from per-row sums rows[s, y], rows added top to bottom."""
@@ -284,9 +291,9 @@ def mean_std(rows: ti.template(), s: ti.i32, count: ti.f64) -> ti.types.vector(2
     return ti.Vector([mean, ti.sqrt(var)], dt=ti.f64)
 
 
-@ti.kernel
-def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32, snr: ti.f64, count: ti.f64,
-                     stats: ti.template()):
+@ti.func
+def threshold_and_intensity_range(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32, snr: ti.f64,
+                                  count: ti.f64, stats: ti.template()):
     """Eq. 23 threshold and Eq. 26 intensity range (one serial task).
 
     stats = [T_acc2, I_min (clamped ≥ 0), I_max, mean(I_acc2), std2(I_acc2), mean(z), std2(z)].
@@ -302,6 +309,13 @@ def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32
         stats[4] = acc2[1]
         stats[5] = z[0]
         stats[6] = z[1]
+
+
+@ti.kernel
+def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32, snr: ti.f64, count: ti.f64,
+                     stats: ti.template()):
+    """One launch of :func:`threshold_and_intensity_range`."""
+    threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
 
 
 @ti.func
@@ -326,12 +340,12 @@ def lef_log_weight(b, a, i_min, i_max):
     return b * ic - a * (ic * ic)
 
 
-@ti.kernel
-def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), s: ti.i32, z: ti.template(),
-                    valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
-                    memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
-                    row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
-                    serial: ti.template()):
+@ti.func
+def candidate_pixels(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), s: ti.i32, z: ti.template(),
+                     valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
+                     memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
+                     row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
+                     serial: ti.template()):
     """Eqs. 24 and 27–29: I_rt = [I_acc2 > T_acc2] ∧ [I_acc == I_acc_max], tested 8 lanes at a time;
     at I_rt pixels log Sal = log ω̌_lef (σ = 1), or, with ``accumulated``, lef_scale·L of the
     multi-frame LEF in memory[ms] (:func:`accumulate_lef`), listed per row (row_x, row_logw) in
@@ -360,9 +374,20 @@ def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.templat
 
 
 @ti.kernel
-def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
-                   valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
-                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), s: ti.i32, z: ti.template(),
+                    valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
+                    memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
+                    row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
+                    serial: ti.template()):
+    """One launch of :func:`candidate_pixels`."""
+    candidate_pixels(acc2, acc, acc_max, s, z, valid, d, a, stats, memory, ms, lef_scale, accumulated, row_x,
+                     row_logw, row_lef, n_row, serial)
+
+
+@ti.func
+def multi_frame_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
+                    valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
+                    n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
     """Multi-frame LEF (not in the paper; a dynamic-programming accumulation of Eq. 27):
     memory[dst] = log ω̌⁺(z[zs]) + γ·max_{(2r+1)²} memory[src], γ = ``memory_decay``, where
     log ω̌⁺ = max over I ≥ 0 of −A·I² + B·I (Eqs. 27–28 without the Eq. 26 bounds: (z⋆D)²/(4A)
@@ -382,6 +407,14 @@ def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, me
                 for xb in range(memory.shape[2]):
                     lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
                     memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
+
+
+@ti.kernel
+def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
+                   valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
+                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+    """One launch of :func:`multi_frame_lef`."""
+    multi_frame_lef(z, zs, d, a, memory_decay, valid, memory, src, dst, ring, n_chunks, r, serial)
 
 
 @ti.func
@@ -431,13 +464,13 @@ def insert_best(best: ti.template(), value: ti.f32, pixel: ti.i32):
         best[i, 1] = ti.cast(pixel, ti.f64)
 
 
-@ti.kernel
-def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
-                   col_block: ti.template(),
-                   block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
-                   entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
-                   scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
-                   written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
+@ti.func
+def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
+                        col_block: ti.template(),
+                        block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
+                        entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
+                        scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
+                        written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
     """Eqs. 29–33 for every block in one serial launch (blocks are few and I_rt pixels sparse).
 
     The I_rt pixels are first gathered from the row lists into per-block slabs.  Sal = exp(log Sal − block max); N_eff = (Σ Sal)²/Σ Sal² in f64 (Eq. 30); T_ep is the
@@ -503,6 +536,67 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
             block_stats[b, 3] = kept
             block_nnz[b] = 0
             block_max[b] = NEG_INF
+
+
+@ti.kernel
+def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
+                   col_block: ti.template(),
+                   block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
+                   entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
+                   scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
+                   written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
+    """One launch of :func:`proposals_per_block`."""
+    proposals_per_block(row_x, row_logw, n_row, row_base, col_block, block_offset, block_nnz, block_max,
+                        entry_pixel, entry_logw, entry_sal, scratch, block_stats, proposal, written, n_written,
+                        row_lef, best)
+
+
+@ti.func
+def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written: ti.template(), best: ti.template(),
+                      proposal_out: ti.template(), best_out: ti.template()):
+    """The frame's proposal pixels (the ``written`` list; ``proposal_out`` arrives zeroed) and ``best`` into
+    host arrays (one serial task: the pixels are few)."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        w = proposal.shape[1]
+        for i in range(n_written[None]):
+            y, x = written[i] // w, written[i] % w
+            proposal_out[y, x] = proposal[y, x]
+        for i in range(best.shape[0]):
+            best_out[i, 0] = best[i, 0]
+            best_out[i, 1] = best[i, 1]
+
+
+@ti.kernel
+def second_layer_and_blocks(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32,
+                            acc2: ti.template(), acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32,
+                            snr: ti.f64, count: ti.f64, stats: ti.template(), z: ti.template(), d: ti.template(),
+                            lef_a: ti.f32, memory_decay: ti.f32, valid: ti.template(), memory: ti.template(),
+                            ms_src: ti.i32, ms: ti.i32, ring: ti.template(), n_chunks: ti.i32, r: ti.template(),
+                            accumulated: ti.template(), acc: ti.template(), lef_scale: ti.f32,
+                            row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(),
+                            n_row: ti.template(), row_base: ti.template(), col_block: ti.template(),
+                            block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
+                            entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
+                            scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
+                            written: ti.template(), n_written: ti.template(), best: ti.template(),
+                            serial: ti.template(), proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                            best_out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+    """The frame in slot ``zs`` from I_acc_max to its proposal in one launch: :func:`second_layer_sum`,
+    :func:`threshold_and_intensity_range`, with ``accumulated`` :func:`multi_frame_lef` (memory slot
+    ``ms_src`` → ``ms``), :func:`candidate_pixels`, :func:`proposals_per_block`, and the proposal and
+    best list into host arrays (:func:`copy_out_proposal`); the same steps as the five kernels, one launch
+    instead of seven with the transfers."""
+    second_layer_sum(acc_max, a, b, c, scale, acc2, acc2_rows, serial)
+    threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
+    if ti.static(accumulated):
+        multi_frame_lef(z, zs, d, lef_a, memory_decay, valid, memory, ms_src, ms, ring, n_chunks, r, serial)
+    candidate_pixels(acc2, acc, acc_max, zs, z, valid, d, lef_a, stats, memory, ms, lef_scale, accumulated, row_x,
+                     row_logw, row_lef, n_row, serial)
+    proposals_per_block(row_x, row_logw, n_row, row_base, col_block, block_offset, block_nnz, block_max,
+                        entry_pixel, entry_logw, entry_sal, scratch, block_stats, proposal, written, n_written,
+                        row_lef, best)
+    copy_out_proposal(proposal, written, n_written, best, proposal_out, best_out)
 
 
 # ---------------------------------------------------------------- single operators (tests, figures)

@@ -89,7 +89,7 @@ class FrontEnd:
 
     def _front_frame(self, s) -> FrontFrame:
         """Frame s.frame right after the saliency stage emitted it (the next emission overwrites its proposal)."""
-        return FrontFrame(s.frame, self._z.pop(s.frame), backend.to_host(self.saliency.engine.proposal), s.best_lef)
+        return FrontFrame(s.frame, self._z.pop(s.frame), self.saliency.engine.proposal_copy(), s.best_lef)
 
     def close(self) -> None:
         """Nothing to release (see :meth:`FrontEndProcess.close`)."""

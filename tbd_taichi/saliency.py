@@ -121,6 +121,10 @@ class NumpySaliencyEngine:
         self.memory = np.zeros(shape, np.float32)  # the multi-frame LEF of the last frame emitted
         self.proposal = np.zeros(shape, np.float32)  # the latest frame's OPsal_N, as the Taichi engine keeps it
 
+    def proposal_copy(self) -> np.ndarray:
+        """The last emitted frame's proposal (Eq. 33) as an array of its own, which the caller may change."""
+        return self.proposal.copy()
+
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         """Store frame t and compute I_se_max(t) (Eqs. 20–21 and the first max filter)."""
         self.ring["z"][slot] = z
@@ -217,6 +221,7 @@ class TaichiSaliencyEngine:
         f.n_written.fill(0)
         f.memory.fill(0)
         self.host_lanes = np.zeros((self.shape[0], self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
+        self.host_proposal = None  # the last emitted frame's proposal, until proposal_copy hands it over
 
     def _fields(self):
         """The engine's Taichi fields: ring buffers of 8-lane rows, per-row and per-block scratch."""
@@ -250,9 +255,10 @@ class TaichiSaliencyEngine:
         f.entry_sal, f.scratch = ti.field(ti.f32, shape=h * w), ti.field(ti.f32, shape=h * w)
         return f
 
-    @property
-    def proposal(self):
-        return self.f.proposal
+    def proposal_copy(self) -> np.ndarray:
+        """The last emitted frame's proposal (Eq. 33) as a host array of its own, which the caller may change."""
+        out, self.host_proposal = self.host_proposal, None
+        return out if out is not None else backend.to_host(self.f.proposal)
 
     def put_and_energy(self, slot: int, z: np.ndarray) -> None:
         ks = self.ks
@@ -266,21 +272,22 @@ class TaichiSaliencyEngine:
                                self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
+        """I_acc2 to the proposal of the frame in ``slot`` in one launch; the proposal comes back as a host
+        array of its own (:meth:`proposal_copy`), written sparsely into zeros."""
         ks, f = self.ks, self.f
-        ks.accumulate_moments(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, self.serial)
-        ks.frame_statistics(f.acc2_rows, f.z_rows, slot, snr, float(self.shape[0] * self.shape[1]), f.stats)
         accumulated = self.lef_memory > 0
+        src = self.memory_slot
         if accumulated:
-            src, self.memory_slot = self.memory_slot, 1 - self.memory_slot
-            ks.accumulate_lef(f.ring["z"], slot, f.d, a, self.lef_memory, f.valid, f.memory, src, self.memory_slot,
-                              f.ring_max, self.n_chunks, self.r, self.serial)
-        ks.segment_and_lef(f.acc2, f.ring["acc"], f.ring["acc_max"], slot, f.ring["z"], f.valid, f.d, a, f.stats,
-                           f.memory, self.memory_slot, self.lef_scale, accumulated,
-                           f.row_x, f.row_logw, f.row_lef, f.n_row, self.serial)
-        ks.block_proposal(f.row_x, f.row_logw, f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz,
-                          f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch,
-                          f.block_stats, f.proposal, f.written, f.n_written, f.row_lef, f.best)
-        best = backend.to_host(f.best)
+            self.memory_slot = 1 - src
+        self.host_proposal = np.zeros(self.shape, np.float32)
+        best = np.empty(f.best.shape)
+        ks.second_layer_and_blocks(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, f.z_rows, slot, snr,
+                                   float(self.shape[0] * self.shape[1]), f.stats, f.ring["z"], f.d, a, self.lef_memory,
+                                   f.valid, f.memory, src, self.memory_slot, f.ring_max, self.n_chunks, self.r,
+                                   accumulated, f.ring["acc"], self.lef_scale, f.row_x, f.row_logw, f.row_lef,
+                                   f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz, f.block_max,
+                                   f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch, f.block_stats, f.proposal,
+                                   f.written, f.n_written, f.best, self.serial, self.host_proposal, best)
         if not details:
             return {"best_lef": best}
         stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)
@@ -289,7 +296,7 @@ class TaichiSaliencyEngine:
         mask = np.zeros(self.shape, bool)
         for off, n in zip(self.grid.offsets, nnz):
             mask.ravel()[entries[off:off + n]] = True
-        return {"proposal": backend.to_host(self.f.proposal), "mask": mask, "best_lef": best,
+        return {"proposal": self.host_proposal.copy(), "mask": mask, "best_lef": best,
                 "threshold": float(stats[0]), "i_range": (float(stats[1]), float(stats[2])),
                 "n_eff": blocks[:, 0], "k": blocks[:, 1].astype(np.int64), "nnz": nnz}
 
