@@ -622,12 +622,15 @@ class ParticleKernels(PopulationKernels):
              q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32,
              noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
              z: ti.types.ndarray(dtype=ti.f32, ndim=2), n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
-             systematic: ti.template()):
+             systematic: ti.template(), seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template()):
         """Steps 1–5 in one launch, for a filter with nothing to do between them (a launch costs
-        tens of µs on the CPU backend)."""
+        tens of µs on the CPU backend); with ``read_seq`` also the resampled particles' Seq in state
+        order into ``seq`` (:meth:`read_seq`, which the searching PFs need next)."""
         self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
         self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
         self.resample_particles(seed, frame, b, n_out, systematic)
+        if ti.static(read_seq):
+            self.seq_in_state_order(1 - b, seq)
 
     @ti.func
     def resample_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(),

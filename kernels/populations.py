@@ -163,6 +163,10 @@ class PopulationKernels:
     @ti.kernel
     def read_seq(self, b: ti.i32, seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
         """The Seq of every live particle, in state order."""
+        self.seq_in_state_order(b, seq)
+
+    @ti.func
+    def seq_in_state_order(self, b: ti.i32, seq: ti.template()):
         self.state_starts()
         self.for_states(self.copy_seq, b, ti.static((seq,)))
 

@@ -133,6 +133,7 @@ class ParticlePool:
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
         self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
+        self._no_seq = np.zeros(1, np.int32)  # step's Seq output when none is read
         self._z = np.zeros(self.frame_shape, np.float32)  # the normalised frame weigh reads
         self._eliminated = None  # (particles, populations) of the last eliminate, until its hand_over
         self.buf = 0
@@ -295,15 +296,19 @@ class ParticlePool:
     def seq_in_state_order(self, out: np.ndarray | None = None) -> np.ndarray:
         """The Seq (particle-population label, Eq. 36) of every live particle, in :meth:`state` order;
         into the front of ``out`` (int32, at least that long) if given, which saves a fresh array per frame."""
-        n = int(self.counts.sum())
-        if out is None:
-            out = np.empty(n, np.int32)
-        elif out.dtype != np.int32 or out.ndim != 1 or len(out) < n or not out.flags.c_contiguous:
-            raise ParameterError(f"out must be a C-contiguous int32 array of at least {n} elements")
-        seq = out[:n]
-        if n:
+        seq = self._seq_buffer(out, int(self.counts.sum()))
+        if len(seq):
             self.k.read_seq(self.buf, seq)
         return seq
+
+    @staticmethod
+    def _seq_buffer(out: np.ndarray | None, n: int) -> np.ndarray:
+        """The first n elements of ``out`` (checked: C-contiguous int32, long enough), or a new array."""
+        if out is None:
+            return np.empty(n, np.int32)
+        if out.dtype != np.int32 or out.ndim != 1 or len(out) < n or not out.flags.c_contiguous:
+            raise ParameterError(f"out must be a C-contiguous int32 array of at least {n} elements")
+        return out[:n]
 
     def states_at(self, index) -> dict:
         """Like :meth:`state`, for the live particles at positions ``index`` of the state order."""
@@ -418,18 +423,25 @@ class ParticlePool:
         self.buf = 1 - self.buf
         self.counts = n_out
 
-    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False, top_up=None) -> None:
+    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False, top_up=None,
+             seq_out: np.ndarray | None = None) -> np.ndarray | None:
         """One full filter step on normalised frame ``z`` for every group: predict (with ``top_up``),
         weigh and resample in one launch (``z`` serves this step only; ``weigh`` keeps using the last
-        ``load_frame``).  ``n_out`` defaults to the live counts after the top-up."""
+        ``load_frame``).  ``n_out`` defaults to the live counts after the top-up.  With ``seq_out``
+        (as for :meth:`seq_in_state_order`) the same launch also reads the resampled particles' Seq,
+        and the filled front of ``seq_out`` is returned."""
         z = self._checked_frame(z)  # read in this launch, so no copy
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(n_out, counts)
+        seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
+        read = seq is not None and len(seq) > 0
         h, w = self.frame_shape
         self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
-                    self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic))
+                    self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic),
+                    seq if read else self._no_seq, read)
         self.buf = 1 - self.buf
         self.counts = n_out
+        return seq
 
     def normalised_weights(self) -> np.ndarray:
         """Eq. 16 per live particle, in :meth:`state` order (for tests and diagnostics)."""

@@ -394,16 +394,17 @@ class SGDSPF:
         pool.set_proposal_map(maps, self._labels(support))
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
-        pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts))
+        seq = pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts), seq_out=self._seq)
         if p.msw_reference == "search":
             log_msw = float(pool.max_log_weights().max())
         else:
             log_msw = msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
-        self._eliminate_and_hand_over(f)
+        self._eliminate_and_hand_over(f, seq)
         return log_msw
 
-    def _eliminate_and_hand_over(self, f: int) -> None:
-        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp.
+    def _eliminate_and_hand_over(self, f: int, seq: np.ndarray) -> None:
+        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp; ``seq``: the
+        searching particles' Seq in state order (from the step).
 
         A PP is a (block, Seq) pair.  The host numbers the PPs of all blocks at once and decides the
         quotas and hand-overs; the per-particle work runs on the pool (``ParticlePool.eliminate`` and
@@ -412,7 +413,7 @@ class SGDSPF:
 
         p, pool = self.p, self.search
         group = np.repeat(np.arange(pool.n_groups, dtype=np.int32), pool.counts)
-        pp_block, inverse, counts = populations(group, pool.seq_in_state_order(out=self._seq))
+        pp_block, inverse, counts = populations(group, seq)
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
         keep, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))

@@ -351,8 +351,10 @@ def test_one_launch_step_equals_the_three_stages(rng, engine):
         p.set_state(states)
         pools.append(p)
     one, three = pools
+    seq_out = np.full(sum(CAPS) + 3, -7, np.int32)
     for f, (n_out, systematic) in enumerate([(None, False), ([650, 1400, 0], False), ([500, 900, 300], True)]):
-        one.step(f, z, n_out=n_out, systematic=systematic)
+        seq_out[:] = -7
+        seq = one.step(f, z, n_out=n_out, systematic=systematic, seq_out=seq_out if f else None)
         three.load_frame(z)
         three.predict(f)
         three.weigh()
@@ -360,6 +362,14 @@ def test_one_launch_step_equals_the_three_stages(rng, engine):
         a, b = one.state(), three.state()
         assert all(np.array_equal(a[k], b[k]) for k in a), f
         np.testing.assert_array_equal(one.max_log_weights(), three.max_log_weights())
+        if f:  # the Seq read in the same launch: the resampled particles' own, in state order, in seq_out's front
+            assert seq.base is seq_out and len(seq) == int(one.counts.sum())
+            np.testing.assert_array_equal(seq, b["seq"])
+            assert (seq_out[len(seq):] == -7).all()
+        else:
+            assert seq is None
+    with pytest.raises(ParameterError, match="int32"):
+        one.step(3, z, seq_out=np.zeros(sum(CAPS), np.int64))
 
 
 def test_weights_use_the_frame_as_it_was_loaded(rng):

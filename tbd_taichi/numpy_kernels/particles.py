@@ -299,10 +299,12 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.store_counts(counts)
 
     def step(self, seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z, n_out,
-             systematic) -> None:
+             systematic, seq, read_seq) -> None:
         self.predict(seed, frame, b, counts, q1, q2, i_floor, width, height)
         self.weigh(b, psf_sigma, noise_sigma, best, z)
         self.resample(seed, frame, b, n_out, systematic)
+        if read_seq:
+            self.read_seq(1 - b, seq)
 
     def resample(self, seed: int, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
         self.n_out[:] = np.where(self.n > 0, counts, 0)
