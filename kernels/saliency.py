@@ -147,9 +147,9 @@ def store_row_moments(rows: ti.template(), s: ti.i32, y: ti.i32, s1: VEC64, s2: 
 
 # ---------------------------------------------------------------- pipeline kernels
 
-@ti.kernel
-def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_rows: ti.template(),
-               serial: ti.template()):
+@ti.func
+def store_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_rows: ti.template(),
+                serial: ti.template()):
     """Store a padded host frame (H, ⌈W/8⌉) of 8-vectors into ring slot ``zs`` and its per-row
     (Σ z, Σ z²) in f64 (for Eq. 26), summed per lane, then over the lanes."""
     ti.loop_config(serialize=serial, block_dim=ROW_BLOCK)
@@ -161,6 +161,13 @@ def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: t
             z[zs, y, xb] = v
             s1, s2 = add_lane_moments(v, s1, s2)
         store_row_moments(z_rows, zs, y, s1, s2)
+
+
+@ti.kernel
+def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_rows: ti.template(),
+               serial: ti.template()):
+    """One launch of :func:`store_frame`."""
+    store_frame(src, z, zs, z_rows, serial)
 
 
 @ti.func
@@ -199,11 +206,11 @@ def energy_column(z: ti.template(), zs: ti.i32, hs: ti.template(), hm: ti.templa
     return ti.select(peak > 0, centre * total / ti.select(peak > 0, peak, 1.0), VEC(0.0))
 
 
-@ti.kernel
-def energy_collection_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.template(), hm: ti.template(),
-                          line: ti.template(), ring: ti.template(), se_max: ti.template(), ds: ti.i32,
-                          n_chunks: ti.i32, r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(),
-                          serial: ti.template()):
+@ti.func
+def energy_and_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.template(), hm: ti.template(),
+                   line: ti.template(), ring: ti.template(), se_max: ti.template(), ds: ti.i32,
+                   n_chunks: ti.i32, r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(),
+                   serial: ti.template()):
     """I_se (Eqs. 20–21 on max(z, 0)) and its (2r+1)² max filter I_se_max into se_max[ds], streamed.
 
     Each chunk of rows walks down the image once: row y's row pass (rings hs, hm), row y − r's
@@ -231,9 +238,18 @@ def energy_collection_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs
 
 
 @ti.kernel
-def accumulate_max(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, valid: ti.template(),
-                   acc: ti.template(), ds: ti.i32, line: ti.template(), ring: ti.template(), acc_max: ti.template(),
-                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+def energy_collection_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.template(), hm: ti.template(),
+                          line: ti.template(), ring: ti.template(), se_max: ti.template(), ds: ti.i32,
+                          n_chunks: ti.i32, r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(),
+                          serial: ti.template()):
+    """One launch of :func:`energy_and_max`."""
+    energy_and_max(z, zs, valid, hs, hm, line, ring, se_max, ds, n_chunks, r, i_se, keep_i_se, serial)
+
+
+@ti.func
+def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, valid: ti.template(),
+                    acc: ti.template(), ds: ti.i32, line: ti.template(), ring: ti.template(), acc_max: ti.template(),
+                    n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
     """First layer of Eq. 22: I_acc = (Σ of src slots a, b, c3; −1 skipped)·scale into acc[ds] and its
     (2r+1)² max filter into acc_max[ds], streamed like :func:`energy_collection_max` (r halo rows).
     With one slot and scale 1 it is the max filter of that slot."""
@@ -251,6 +267,28 @@ def accumulate_max(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: 
                 row_max(line, c, 0, ring, c, y % (2 * r + 1), valid, r)
             if y0 <= y - r < y1:
                 column_max(ring, c, y - r, h, acc_max, ds, valid, r)
+
+
+@ti.kernel
+def accumulate_max(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, valid: ti.template(),
+                   acc: ti.template(), ds: ti.i32, line: ti.template(), ring: ti.template(), acc_max: ti.template(),
+                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+    """One launch of :func:`first_layer_sum`."""
+    first_layer_sum(src, a, b, c3, scale, valid, acc, ds, line, ring, acc_max, n_chunks, r, serial)
+
+
+@ti.kernel
+def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32,
+                         z_rows: ti.template(), valid: ti.template(), hs: ti.template(), hm: ti.template(),
+                         line: ti.template(), ring: ti.template(), se_max: ti.template(), n_chunks: ti.i32,
+                         r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(), a: ti.i32, b: ti.i32,
+                         c3: ti.i32, scale: ti.f32, acc: ti.template(), ds: ti.i32, acc_max: ti.template(),
+                         serial: ti.template()):
+    """A new frame into slot ``zs`` (:func:`store_frame`, :func:`energy_and_max`) and the first layer of the
+    frame before it into slot ``ds`` (:func:`first_layer_sum` of se_max slots a, b, c3), in one launch."""
+    store_frame(src, z, zs, z_rows, serial)
+    energy_and_max(z, zs, valid, hs, hm, line, ring, se_max, zs, n_chunks, r, i_se, keep_i_se, serial)
+    first_layer_sum(se_max, a, b, c3, scale, valid, acc, ds, line, ring, acc_max, n_chunks, r, serial)
 
 
 @ti.func

@@ -130,6 +130,11 @@ class NumpySaliencyEngine:
         self.ring["z"][slot] = z
         self.ring["se_max"][slot] = nps.max_filter(nps.energy_collection(z, self.r), self.r)
 
+    def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
+        """Frame t into ``slot`` with its I_se_max, then the first layer of frame t − 1 into ``dst``."""
+        self.put_and_energy(slot, z)
+        self.first_layer(slots, scale, dst)
+
     def first_layer(self, slots, scale: float, dst: int) -> None:
         """I_acc (Eq. 22, first layer) into acc[dst] and its max filter into acc_max[dst]."""
         total = nps.sum_frames(*[self.ring["se_max"][s] if s >= 0 else None for s in slots], scale)
@@ -267,6 +272,13 @@ class TaichiSaliencyEngine:
                                  self.f.ring_max, self.f.ring["se_max"], slot, self.n_chunks, self.r, self.f.i_se,
                                  self.keep_i_se, self.serial)
 
+    def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
+        """:meth:`put_and_energy` and :meth:`first_layer` in one launch."""
+        f = self.f
+        self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f.ring["z"], slot, f.z_rows, f.valid,
+                                     f.hs, f.hm, f.line, f.ring_max, f.ring["se_max"], self.n_chunks, self.r, f.i_se,
+                                     self.keep_i_se, *slots, scale, f.ring["acc"], dst, f.ring["acc_max"], self.serial)
+
     def first_layer(self, slots, scale: float, dst: int) -> None:
         self.ks.accumulate_max(self.f.ring["se_max"], *slots, scale, self.f.valid, self.f.ring["acc"], dst, self.f.line,
                                self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
@@ -359,10 +371,12 @@ class SaliencyExtractor:
         """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""
         z = stream_frame(z, self.shape, self.n_pushed, "extractor")
         t = self.n_pushed
-        self.engine.put_and_energy(t % 3, z)
+        if t >= 1:  # frame t in, and the first layer of frame t − 1, in one launch
+            slots, scale = self._slots(t - 1, t)
+            self.engine.put_energy_and_first_layer(t % 3, z, slots, scale, (t - 1) % 3)
+        else:
+            self.engine.put_and_energy(t % 3, z)
         self.n_pushed = t + 1
-        if t >= 1:
-            self._layer1(t - 1, t)
         return [self._emit(t - 2, t)] if t >= 2 else []
 
     def flush(self) -> list[SaliencyFrame]:
