@@ -79,7 +79,7 @@ class FrontEnd:
         self.frames_in += 1
         t1 = time.perf_counter()
         self.stage_seconds["normalise"] += t1 - t0
-        done = [self._front_frame(s) for s in self.saliency.push(z)]
+        done = [self._front_frame(s) for s in self.saliency.push_checked(z)]  # z is finite: checked raw frame
         self.stage_seconds["saliency"] += time.perf_counter() - t1
         return done
 

@@ -369,7 +369,10 @@ class SaliencyExtractor:
 
     def push(self, z) -> list[SaliencyFrame]:
         """Add normalised frame t; returns the output for frame t−2 (empty for t < 2)."""
-        z = stream_frame(z, self.shape, self.n_pushed, "extractor")
+        return self.push_checked(stream_frame(z, self.shape, self.n_pushed, "extractor"))
+
+    def push_checked(self, z: np.ndarray) -> list[SaliencyFrame]:
+        """:meth:`push` for a frame known to be a finite float32 (H, W) array (the tracker's own z)."""
         t = self.n_pushed
         if t >= 1:  # frame t in, and the first layer of frame t − 1, in one launch
             slots, scale = self._slots(t - 1, t)

@@ -110,17 +110,15 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
     does not depend on where the particles are, so it holds when the multi-frame LEF concentrates them.
     Like the searching particles (saliency is masked at tracks, Eq. 36's PPs are handed over), it
     leaves out what is tracked already, so a bright tracked object does not hold other tracks down."""
-    valid = best_lef[:, 0] > -1e37
-    if not valid.any():
+    rows = [(value, int(pixel)) for value, pixel in best_lef.tolist() if value > -1e37]
+    if not rows:
         return -3.0e38
-    values, pixels = best_lef[valid, 0], best_lef[valid, 1].astype(np.int64)
-    free = np.ones(len(values), bool)
-    if tracked:
-        centres = np.array([nearest_pixel(x, y) for x, y in tracked], np.int64)
-        near_x = np.abs(pixels[:, None] % width - centres[None, :, 0]) <= TRACK_MASK_HALF
-        near_y = np.abs(pixels[:, None] // width - centres[None, :, 1]) <= TRACK_MASK_HALF
-        free = ~(near_x & near_y).any(axis=1)
-    return float(values[np.argmax(free)] if free.any() else values[-1]) + MSW_LEF_OFFSET
+    centres = [nearest_pixel(x, y) for x, y in tracked]
+    for value, pixel in rows:  # descending: the first free one (usually the first) decides
+        cx, cy = pixel % width, pixel // width
+        if not any(abs(cx - tx) <= TRACK_MASK_HALF and abs(cy - ty) <= TRACK_MASK_HALF for tx, ty in centres):
+            return value + MSW_LEF_OFFSET
+    return rows[-1][0] + MSW_LEF_OFFSET
 
 
 def icef_of_log_ratio(log_r: float, lower: float = ICEF_LOWER) -> float:
@@ -193,8 +191,8 @@ def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     """Indices that bring a PP of n particles to ``size`` (Algorithm 2's "random eliminating or
     copying"): a random subset without replacement if n ≥ size, else all plus random copies.
     ``u`` holds at least max(n, size) uniforms."""
-    if n >= size:
-        return np.sort(np.argsort(u[:n], kind="stable")[:size])
+    if n >= size:  # the size smallest u (distinct: 53-bit uniforms), in index order
+        return np.sort(np.argpartition(u[:n], size - 1)[:size]) if size else np.zeros(0, np.int64)
     return np.concatenate([np.arange(n), np.floor(u[:size - n] * n).astype(np.int64)])
 
 

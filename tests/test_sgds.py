@@ -300,6 +300,9 @@ def test_resize_population():
     assert len(down) == 500 and len(np.unique(down)) == 500 and down.max() < 800
     up = resize_population(120, 500, u)
     assert len(up) == 500 and set(range(120)) <= set(up.tolist()) and up.max() < 120
+    for n, size in ((800, 500), (500, 500), (501, 1), (7, 0)):  # the size smallest uniforms, in index order
+        v = np.random.default_rng(n).random(n)
+        np.testing.assert_array_equal(resize_population(n, size, v), np.sort(np.argsort(v, kind="stable")[:size]))
 
 
 @pytest.mark.parametrize("shape,frames,seeds", [((200, 200), 150, range(10)), ((50, 50), 70, range(4))])
