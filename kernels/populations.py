@@ -114,12 +114,20 @@ class PopulationKernels:
 
     @ti.kernel
     def hand_over(self, b: ti.i32, drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
-                  index: ti.types.ndarray(dtype=ti.i32, ndim=2), counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+                  index: ti.types.ndarray(dtype=ti.i32, ndim=2), counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  rank: ti.types.ndarray(dtype=ti.i32, ndim=1), cursor: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  floats: ti.types.ndarray(dtype=ti.f32, ndim=2), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                  members: ti.template()):
         """After :meth:`eliminate`: the particles of dropped PPs (drop[k] ≠ 0) go too; the index image
         P_pp (Eq. 36): each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the
         larger PP winning, then the later in state order; the kept particles move to the front of
-        their slabs, and ``counts`` receives every group's new live count."""
+        their slabs, and ``counts`` receives every group's new live count.  With ``members``, the
+        survivors of elimination in each PP k with rank[k] = r ≥ 0 (the handed-over PPs) are first
+        copied out, in state order from column cursor[r] on (the host sets each PP's first column):
+        rows x, vx, y, vy, I of ``floats`` and E, Tp, Seq of ``ints``, as ``read_slots`` gives them."""
         h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
+        if ti.static(members):
+            self.for_states(self.copy_member, b, ti.static((rank, cursor, floats, ints)))
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
             self.pixel_key[y, x] = -1
@@ -131,6 +139,19 @@ class PopulationKernels:
         ti.loop_config(serialize=True)
         for g in range(counts.shape[0]):
             counts[g] = self.n[g]
+
+    @ti.func
+    def copy_member(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """``hand_over``'s copy of particle s (slot i) if it survived elimination in a handed-over PP (a
+        PP lies in one group, whose task alone moves its cursor)."""
+        rank, cursor, floats, ints = ti.static(arrays)
+        r = rank[self.state_pp[s]]
+        if r >= 0 and self.state_keep[s] != 0:
+            m = cursor[r]
+            cursor[r] = m + 1
+            floats[0, m], floats[1, m], floats[2, m] = self.x[b, i], self.vx[b, i], self.y[b, i]
+            floats[3, m], floats[4, m] = self.vy[b, i], self.inten[b, i]
+            ints[0, m], ints[1, m], ints[2, m] = self.e[b, i], self.tp[b, i], self.seq[b, i]
 
     @ti.func
     def claim_pixel(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):

@@ -331,7 +331,7 @@ class ParticlePool:
         Returns the survivors' flags (state order) and per population the sums over survivors
         (columns ``kernels.populations.P_*``: count, count with E = 1, Σ Tp, Σ x and Σ y with E = 1).
         The pool is unchanged until :meth:`hand_over`, which must come next."""
-        from .kernels.populations import N_PP_SUMS
+        from .kernels.populations import N_PP_SUMS, P_KEPT
 
         pp = np.ascontiguousarray(pp, dtype=np.int32).reshape(-1)
         table = np.array([size, take, phase], dtype=np.float64).reshape(3, -1)
@@ -347,29 +347,49 @@ class ParticlePool:
         sums = np.zeros((table.shape[1], N_PP_SUMS))
         if n:
             self.k.eliminate(self.buf, pp, table, keep, sums)
-        self._eliminated = (n, table.shape[1])
+        self._eliminated = (n, sums[:, P_KEPT].astype(np.int64))  # particles, and survivors per population
         return keep.view(bool), sums  # 0 or 1 in int8
 
-    def hand_over(self, drop, index: np.ndarray) -> None:
+    def hand_over(self, drop, index: np.ndarray, handed=None) -> tuple[dict, list] | None:
         """After :meth:`eliminate`: remove its eliminated particles and those of the populations
         flagged in ``drop``; write the index image P_pp (Eq. 36) into ``index`` (H, W, int32): each
         pixel gets the Seq of the kept particles in it, those of the larger population winning, then
-        the later in state order (0: none)."""
+        the later in state order (0: none).  ``handed`` (population indices, usually among the dropped):
+        the same launch first reads their particles that survived the elimination, and returns
+        (states, sizes): arrays x, vx, y, vy, inten, e, tp, seq holding population after population in
+        ``handed`` order, each in state order, and the number of each."""
         if self._eliminated is None:
             raise ParameterError("hand_over needs an eliminate first")
-        n, n_pp = self._eliminated
+        n, kept = self._eliminated
+        n_pp = len(kept)
         drop = np.ascontiguousarray(drop, dtype=np.int8).reshape(-1)
         if drop.shape != (n_pp,):
             raise ParameterError(f"need one drop flag per population ({n_pp}), got {drop.shape}")
         if index.shape != self.frame_shape or index.dtype != np.int32 or not index.flags.c_contiguous:
             raise ParameterError(f"index image must be a C-contiguous int32 array of shape {self.frame_shape}")
+        want = handed is not None
+        handed = np.asarray(handed if want else [], np.int64).reshape(-1)
+        if len(handed) and (handed.min() < 0 or handed.max() >= n_pp or len(np.unique(handed)) < len(handed)):
+            raise ParameterError(f"handed populations must be distinct indices in [0, {n_pp})")
         self._eliminated = None
-        if not n:
+        sizes = kept[handed]
+        floats = np.empty((len(FLOAT_STATE), max(int(sizes.sum()), 1)), np.float32)
+        ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
+        if n:
+            rank = np.full(n_pp, -1, np.int32)
+            rank[handed] = np.arange(len(handed), dtype=np.int32)
+            cursor = (np.cumsum(sizes) - sizes).astype(np.int32) if len(handed) else np.zeros(1, np.int32)
+            counts = np.empty(self.n_groups, np.int32)
+            self.k.hand_over(self.buf, drop, index, counts, rank, cursor, floats, ints, bool(len(handed)))
+            self.counts = counts
+        else:
             index[...] = 0
-            return
-        counts = np.empty(self.n_groups, np.int32)
-        self.k.hand_over(self.buf, drop, index, counts)
-        self.counts = counts
+        if not want:
+            return None
+        m = int(sizes.sum())
+        states = dict(zip(FLOAT_STATE, floats[:, :m]))
+        states.update(zip(INT_STATE, ints[:, :m]))
+        return states, sizes.tolist()
 
     # ------------------------------------------------------------ one step
 

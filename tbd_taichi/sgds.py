@@ -414,7 +414,7 @@ class SGDSPF:
         pp_block, inverse, counts = populations(group, seq)
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
-        keep, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))
+        _, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))
         n_pp, ne = sums[:, P_KEPT], sums[:, P_KEPT_E]
         with np.errstate(invalid="ignore", divide="ignore"):
             pe, ptp = ne / n_pp, sums[:, P_TP] / n_pp  # Eq. 38 (PE = ΣE/N_pp)
@@ -428,15 +428,8 @@ class SGDSPF:
             elif len(handed) < len(self.free_groups):
                 drop[k] = True
                 handed.append(k)
-        members, sizes = None, []
-        if handed:  # the handed PPs' kept particles, PP after PP, each in state order
-            rank = np.full(len(counts), -1, np.int32)
-            rank[handed] = np.arange(len(handed))
-            of = np.take(rank, inverse)
-            index = np.flatnonzero((of >= 0) & keep)
-            index = index[np.argsort(of[index], kind="stable")]
-            members, sizes = pool.states_at(index), np.bincount(of[index], minlength=len(handed)).tolist()
-        pool.hand_over(drop, self.pp_index)
+        # the handed PPs' kept particles (PP after PP, each in state order) come back from the same launch
+        members, sizes = pool.hand_over(drop, self.pp_index, handed)
         self._start_tracks(f, members, sizes, rng, tracked)
 
     def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,

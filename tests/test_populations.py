@@ -95,8 +95,14 @@ def test_eliminate_and_hand_over_match_the_host_reference(engine, monkeypatch):
     np.testing.assert_array_equal(sums, sums_ref)  # same order of f64 additions: same bits
     np.testing.assert_array_equal(np.bincount(inverse, weights=~keep, minlength=len(counts)), take)  # Eq. 37 quotas
     index = np.full(SHAPE, -5, np.int32)
-    pool.hand_over(drop, index)
+    handed = rng.permutation(np.flatnonzero(drop))[:4]  # handed-over PPs, in a shuffled order
+    handed = np.append(handed, 0)  # PP 0 loses none to elimination
+    members, sizes = pool.hand_over(drop, index, handed)
     np.testing.assert_array_equal(index, index_ref)
+    picked = np.concatenate([np.flatnonzero(keep_ref & (inverse == k)) for k in handed])  # PP after PP, state order
+    assert sizes == [int((keep_ref & (inverse == k)).sum()) for k in handed] and sum(sizes) == len(picked) > 0
+    for key in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq"):
+        np.testing.assert_array_equal(members[key], st[key][picked], err_msg=key)
     after = pool.state()
     for key in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "group"):
         np.testing.assert_array_equal(after[key], st[key][final_ref], err_msg=key)
@@ -130,6 +136,10 @@ def test_population_arguments_are_checked():
         pool.hand_over(np.zeros(2, bool), np.zeros(SHAPE, np.int32))
     with pytest.raises(ParameterError, match="index image"):
         pool.hand_over(np.zeros(1, bool), np.zeros((2, 2), np.int32))
+    with pytest.raises(ParameterError, match="handed populations"):
+        pool.hand_over(np.zeros(1, bool), np.zeros(SHAPE, np.int32), [1])
+    with pytest.raises(ParameterError, match="handed populations"):
+        pool.hand_over(np.zeros(1, bool), np.zeros(SHAPE, np.int32), [0, 0])
 
 
 @pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])

@@ -54,9 +54,17 @@ class NumpyPopulationKernels:
         sums[:, P_Y] = np.bincount(pp, weights=np.where(with_e, self.y[b, slots], 0), minlength=n_pp)
         self._eliminated = (pp.copy(), size, kept)
 
-    def hand_over(self, b, drop, index, counts) -> None:
+    def hand_over(self, b, drop, index, counts, rank, cursor, floats, ints, members) -> None:
         pp, size, kept = self._eliminated
         slots = self.live_slots()
+        if members:  # the survivors of the ranked PPs, PP by PP (rank order), each in state order
+            picked = np.flatnonzero(kept & (rank[pp] >= 0))
+            picked = picked[np.argsort(rank[pp[picked]], kind="stable")]
+            columns = cursor[0] + np.arange(len(picked))
+            for row, name in enumerate(("x", "vx", "y", "vy", "inten")):
+                floats[row, columns] = getattr(self, name)[b, slots[picked]]
+            for row, name in enumerate(("e", "tp", "seq")):
+                ints[row, columns] = getattr(self, name)[b, slots[picked]]
         keep = kept & (drop[pp] == 0)
         h, w = index.shape
         x = np.floor(self.x[b, slots] + np.float32(0.5)).astype(np.int64)
