@@ -32,6 +32,7 @@ class PopulationKernels:
         self.pp_size, self.pp_take, self.pp_acc = ti.field(ti.i32, capacity), ti.field(ti.i32, capacity), \
             ti.field(ti.i32, capacity)
         self.pixel_key = ti.field(ti.i64, shape=frame_shape)
+        self.pp_sums = ti.field(ti.f64, shape=(capacity, N_PP_SUMS))  # eliminate's sums, copied out at its end
 
     @ti.func
     def state_starts(self):
@@ -75,20 +76,26 @@ class PopulationKernels:
             self.pp_take[k] = ti.cast(table[1, k], ti.i32)
             self.pp_acc[k] = ti.min(ti.cast(table[2, k] * table[0, k], ti.i32), n_k - 1)
             for c in ti.static(range(N_PP_SUMS)):
-                sums[k, c] = 0.0
-        self.for_states(self.remove_spread, b, ti.static((pp, keep, sums)))
+                self.pp_sums[k, c] = 0.0
+        self.for_states(self.remove_spread, b, ti.static((pp, keep)))
+        ti.loop_config(serialize=True)  # the sums pass through a field: an argument array's pointer is
+        for k in range(table.shape[1]):  # reloaded after every store, which made the pass slower
+            for c in ti.static(range(N_PP_SUMS)):
+                sums[k, c] = self.pp_sums[k, c]
 
     @ti.func
     def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
         """``eliminate`` for particle s (slot i)."""
-        pp, keep, sums = ti.static(arrays)
+        pp, keep = ti.static(arrays)
+        sums = ti.static(self.pp_sums)
         k = pp[s]
         self.state_pp[s] = k
         a = self.pp_acc[k] + self.pp_take[k]
         gone = a >= self.pp_size[k]
         self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
-        keep[s] = ti.cast(not gone, ti.i8)
-        self.state_keep[s] = keep[s]
+        kept = ti.cast(not gone, ti.i8)
+        keep[s] = kept
+        self.state_keep[s] = kept
         if not gone:
             sums[k, P_KEPT] += 1.0
             sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
