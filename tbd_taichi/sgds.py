@@ -200,18 +200,30 @@ def populations(group: np.ndarray, seq: np.ndarray, table_limit: int = 1 << 22):
     """Particle populations as (block, Seq) pairs, ordered by block then Seq.
 
     ``group``: each particle's block, non-decreasing (state order); ``seq``: its Seq.
-    Returns (block of each PP, PP index of each particle, particles per PP).  One bincount over
-    the (block, Seq) table when it has at most ``table_limit`` entries, else a sort."""
+    Returns (block of each PP, PP index of each particle, particles per PP); see :func:`slab_populations`."""
+    group = np.asarray(group, np.int64)
+    return slab_populations(np.bincount(group) if len(group) else np.zeros(0, np.int64), seq, table_limit)
+
+
+def slab_populations(slab_counts, seq: np.ndarray, table_limit: int = 1 << 22):
+    """:func:`populations` of particles listed block by block, ``slab_counts[g]`` of block g (the pool's state
+    order), without a per-particle block array.  One bincount over the (block, Seq) table when it has at
+    most ``table_limit`` entries (each block's keys offset by a slice), else a sort."""
     seq = np.asarray(seq)
     if len(seq) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
-    lo, n_groups = int(seq.min()), int(group[-1]) + 1
+    slab_counts = np.asarray(slab_counts, np.int64)
+    blocks = np.flatnonzero(slab_counts)
+    lo, n_groups = int(seq.min()), int(blocks[-1]) + 1
     span = int(seq.max()) - lo + 1
     if n_groups * span > table_limit:
-        keys, code = np.unique(np.asarray(group, np.int64) * span + (seq.astype(np.int64) - lo), return_inverse=True)
+        group = np.repeat(np.arange(len(slab_counts)), slab_counts)
+        keys, code = np.unique(group * span + (seq.astype(np.int64) - lo), return_inverse=True)
         return keys // span, code.reshape(-1), np.bincount(code.reshape(-1), minlength=len(keys))
-    key = (seq - lo).astype(np.int32)
-    key += (np.asarray(group) * span).astype(np.int32, copy=False)  # block-major key (int32: ≤ table_limit)
+    key = (seq - lo).astype(np.int32, copy=False)  # block-major key (int32: ≤ table_limit)
+    ends = np.cumsum(slab_counts)
+    for g in blocks[1:]:
+        key[ends[g] - slab_counts[g]:ends[g]] += np.int32(g * span)
     table = np.bincount(key, minlength=n_groups * span)
     keys = np.flatnonzero(table)
     index = np.empty(len(table), np.int32)  # PP index of each present key (every particle's key is present)
@@ -410,8 +422,7 @@ class SGDSPF:
         from .kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 
         p, pool = self.p, self.search
-        group = np.repeat(np.arange(pool.n_groups, dtype=np.int32), pool.counts)
-        pp_block, inverse, counts = populations(group, seq)
+        pp_block, inverse, counts = slab_populations(pool.counts, seq)
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
         _, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))

@@ -7,7 +7,7 @@ from tbd_taichi.errors import ParameterError
 from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.particles import ParticlePool
-from tbd_taichi.sgds import eliminated_per_population, populations
+from tbd_taichi.sgds import eliminated_per_population, populations, slab_populations
 
 SHAPE = (19, 27)
 CAPS = [900, 40, 1300, 5]
@@ -177,3 +177,16 @@ def test_populations_number_block_seq_pairs_in_order(seq_span):
     np.testing.assert_array_equal(counts, counts_ref)
     empty = populations(np.zeros(0, np.int64), np.zeros(0, np.int32))
     assert all(len(a) == 0 for a in empty)
+
+
+@pytest.mark.parametrize("seq_span", [7, 1 << 24])
+def test_slab_populations_equal_populations_with_empty_blocks(seq_span):
+    """Counts per block (empty blocks first, between and last) give what the per-particle block array gives."""
+    rng = np.random.default_rng(seq_span + 1)
+    slabs = np.array([0, 400, 0, 0, 1201, 37, 0])
+    group = np.repeat(np.arange(len(slabs)), slabs)
+    seq = rng.integers(0, seq_span, len(group)).astype(np.int32)
+    seq_before = seq.copy()
+    for got, want in zip(slab_populations(slabs, seq), populations(group, seq)):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(seq, seq_before)  # the caller's Seq is not changed
