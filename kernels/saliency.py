@@ -590,6 +590,19 @@ def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.temp
 
 
 @ti.func
+def clear_previous_proposal(written: ti.template(), n_written: ti.template(), proposal_out: ti.template(),
+                            reuse: ti.i32):
+    """With ``reuse``, zero the last frame's proposal pixels (the ``written`` list) in ``proposal_out``, the
+    host array that frame was copied into (one serial task)."""
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        if reuse != 0:
+            w = proposal_out.shape[1]
+            for i in range(n_written[None]):
+                proposal_out[written[i] // w, written[i] % w] = 0.0
+
+
+@ti.func
 def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written: ti.template(), best: ti.template(),
                       proposal_out: ti.template(), best_out: ti.template()):
     """The frame's proposal pixels (the ``written`` list; ``proposal_out`` arrives zeroed) and ``best`` into
@@ -619,18 +632,20 @@ def second_layer_and_blocks(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.
                             scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
                             written: ti.template(), n_written: ti.template(), best: ti.template(),
                             serial: ti.template(), proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                            best_out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+                            best_out: ti.types.ndarray(dtype=ti.f64, ndim=2), reuse: ti.i32):
     """The frame in slot ``zs`` from I_acc_max to its proposal in one launch: :func:`second_layer_sum`,
     :func:`threshold_and_intensity_range`, with ``accumulated`` :func:`multi_frame_lef` (memory slot
     ``ms_src`` → ``ms``), :func:`candidate_pixels`, :func:`proposals_per_block`, and the proposal and
-    best list into host arrays (:func:`copy_out_proposal`); the same steps as the five kernels, one launch
-    instead of seven with the transfers."""
+    best list into host arrays (:func:`copy_out_proposal`; with ``reuse``, ``proposal_out`` holds the last
+    frame's proposal, cleared first); the same steps as the five kernels, one launch instead of seven with the
+    transfers."""
     second_layer_sum(acc_max, a, b, c, scale, acc2, acc2_rows, serial)
     threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
     if ti.static(accumulated):
         multi_frame_lef(z, zs, d, lef_a, memory_decay, valid, memory, ms_src, ms, ring, n_chunks, r, serial)
     candidate_pixels(acc2, acc, acc_max, zs, z, valid, d, lef_a, stats, memory, ms, lef_scale, accumulated, row_x,
                      row_logw, row_lef, n_row, serial)
+    clear_previous_proposal(written, n_written, proposal_out, reuse)
     proposals_per_block(row_x, row_logw, n_row, row_base, col_block, block_offset, block_nnz, block_max,
                         entry_pixel, entry_logw, entry_sal, scratch, block_stats, proposal, written, n_written,
                         row_lef, best)

@@ -285,13 +285,16 @@ class TaichiSaliencyEngine:
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
         """I_acc2 to the proposal of the frame in ``slot`` in one launch; the proposal comes back as a host
-        array of its own (:meth:`proposal_copy`), written sparsely into zeros."""
+        array (:meth:`proposal_copy`), written sparsely into zeros: a new array after the last one was handed
+        over, else the last one with its pixels cleared (no allocation per frame when nobody takes them)."""
         ks, f = self.ks, self.f
         accumulated = self.lef_memory > 0
         src = self.memory_slot
         if accumulated:
             self.memory_slot = 1 - src
-        self.host_proposal = np.zeros(self.shape, np.float32)
+        reuse = self.host_proposal is not None
+        if not reuse:
+            self.host_proposal = np.zeros(self.shape, np.float32)
         best = np.empty(f.best.shape)
         ks.second_layer_and_blocks(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, f.z_rows, slot, snr,
                                    float(self.shape[0] * self.shape[1]), f.stats, f.ring["z"], f.d, a, self.lef_memory,
@@ -299,7 +302,8 @@ class TaichiSaliencyEngine:
                                    accumulated, f.ring["acc"], self.lef_scale, f.row_x, f.row_logw, f.row_lef,
                                    f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz, f.block_max,
                                    f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch, f.block_stats, f.proposal,
-                                   f.written, f.n_written, f.best, self.serial, self.host_proposal, best)
+                                   f.written, f.n_written, f.best, self.serial, self.host_proposal, best,
+                                   int(reuse))
         if not details:
             return {"best_lef": best}
         stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)

@@ -229,6 +229,27 @@ def test_engines_agree_on_random_frames(rng, shape, block, lef_memory):
                     lef_memory=lef_memory, lef_scale=0.5)
 
 
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_proposal_copy_whether_or_not_the_last_one_was_taken(rng, engine):
+    """The tracker's path (details=False, the proposal fetched by ``proposal_copy``) gives each frame's own
+    proposal when only some frames' proposals are taken: the Taichi engine then reuses its host array, with the
+    last frame's pixels cleared, and a taken array is the caller's (changing it changes nothing later)."""
+    frames = rng.standard_normal((12, 40, 52)).astype(np.float32)
+    frames[:, 20, 25] += 4.0
+    reference = {s.frame: s.proposal for s in saliency_sequence(frames, engine=engine, block_size=20)}
+    ext = SaliencyExtractor(frames.shape[1:], block_size=20, engine=engine, details=False)
+    taken = 0
+    for z in frames:
+        for s in ext.push(z):
+            if s.frame % 3 != 1:  # frames 0, 2, 3, 5, …: taken; 1, 4, 7: left in the engine
+                got = ext.engine.proposal_copy()
+                np.testing.assert_array_equal(got, reference[s.frame], err_msg=f"frame {s.frame}")
+                assert (got > 0).any()
+                got[...] = 7.0  # the caller's own array
+                taken += 1
+    assert taken == 7
+
+
 def test_best_lef_lists_the_largest_eq28_weights_over_the_candidates():
     """best_lef: the K largest Eq. 28 LEFs over the Eq. 24 mask and their pixels, descending, whatever
     Eq. 29's weight; (−3e38, −1) rows past the last candidate (a flat frame has none)."""
