@@ -619,30 +619,37 @@ def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written
 
 
 @ti.kernel
-def second_layer_and_blocks(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32,
-                            acc2: ti.template(), acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32,
-                            snr: ti.f64, count: ti.f64, stats: ti.template(), z: ti.template(), d: ti.template(),
-                            lef_a: ti.f32, memory_decay: ti.f32, valid: ti.template(), memory: ti.template(),
-                            ms_src: ti.i32, ms: ti.i32, ring: ti.template(), n_chunks: ti.i32, r: ti.template(),
-                            accumulated: ti.template(), acc: ti.template(), lef_scale: ti.f32,
-                            row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(),
-                            n_row: ti.template(), row_base: ti.template(), col_block: ti.template(),
-                            block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
-                            entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
-                            scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
-                            written: ti.template(), n_written: ti.template(), best: ti.template(),
-                            serial: ti.template(), proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                            best_out: ti.types.ndarray(dtype=ti.f64, ndim=2), reuse: ti.i32):
-    """The frame in slot ``zs`` from I_acc_max to its proposal in one launch: :func:`second_layer_sum`,
-    :func:`threshold_and_intensity_range`, with ``accumulated`` :func:`multi_frame_lef` (memory slot
-    ``ms_src`` → ``ms``), :func:`candidate_pixels`, :func:`proposals_per_block`, and the proposal and
-    best list into host arrays (:func:`copy_out_proposal`; with ``reuse``, ``proposal_out`` holds the last
-    frame's proposal, cleared first); the same steps as the five kernels, one launch instead of seven with the
-    transfers."""
+def second_layer_and_lef(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32,
+                         acc2: ti.template(), acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32,
+                         snr: ti.f64, count: ti.f64, stats: ti.template(), z: ti.template(), d: ti.template(),
+                         lef_a: ti.f32, memory_decay: ti.f32, valid: ti.template(), memory: ti.template(),
+                         ms_src: ti.i32, ms: ti.i32, ring: ti.template(), n_chunks: ti.i32, r: ti.template(),
+                         accumulated: ti.template(), serial: ti.template()):
+    """The frame in slot ``zs``, first half: :func:`second_layer_sum`, :func:`threshold_and_intensity_range`
+    and, with ``accumulated``, :func:`multi_frame_lef` (memory slot ``ms_src`` → ``ms``), in one launch."""
     second_layer_sum(acc_max, a, b, c, scale, acc2, acc2_rows, serial)
     threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
     if ti.static(accumulated):
         multi_frame_lef(z, zs, d, lef_a, memory_decay, valid, memory, ms_src, ms, ring, n_chunks, r, serial)
+
+
+@ti.kernel
+def proposal_from_candidates(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), zs: ti.i32,
+                             z: ti.template(), valid: ti.template(), d: ti.template(), lef_a: ti.f32,
+                             stats: ti.template(), memory: ti.template(), ms: ti.i32, lef_scale: ti.f32,
+                             accumulated: ti.template(), row_x: ti.template(), row_logw: ti.template(),
+                             row_lef: ti.template(), n_row: ti.template(), row_base: ti.template(),
+                             col_block: ti.template(), block_offset: ti.template(), block_nnz: ti.template(),
+                             block_max: ti.template(), entry_pixel: ti.template(), entry_logw: ti.template(),
+                             entry_sal: ti.template(), scratch: ti.template(), block_stats: ti.template(),
+                             proposal: ti.template(), written: ti.template(), n_written: ti.template(),
+                             best: ti.template(), serial: ti.template(),
+                             proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                             best_out: ti.types.ndarray(dtype=ti.f64, ndim=2), reuse: ti.i32):
+    """The frame in slot ``zs``, second half: :func:`candidate_pixels`, :func:`proposals_per_block`, and the
+    proposal and best list into host arrays (:func:`copy_out_proposal`; with ``reuse``, ``proposal_out``
+    holds the last frame's proposal, cleared first by :func:`clear_previous_proposal`), in one launch.
+    (Both halves in one kernel took twice as long to compile as the two, for no measurable gain.)"""
     candidate_pixels(acc2, acc, acc_max, zs, z, valid, d, lef_a, stats, memory, ms, lef_scale, accumulated, row_x,
                      row_logw, row_lef, n_row, serial)
     clear_previous_proposal(written, n_written, proposal_out, reuse)

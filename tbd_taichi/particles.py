@@ -380,7 +380,7 @@ class ParticlePool:
             rank[handed] = np.arange(len(handed), dtype=np.int32)
             cursor = (np.cumsum(sizes) - sizes).astype(np.int32) if len(handed) else np.zeros(1, np.int32)
             counts = np.empty(self.n_groups, np.int32)
-            self.k.hand_over(self.buf, drop, index, counts, rank, cursor, floats, ints, bool(len(handed)))
+            self.k.hand_over(self.buf, drop, index, counts, rank, cursor, floats, ints, want)
             self.counts = counts
         else:
             index[...] = 0
@@ -454,11 +454,11 @@ class ParticlePool:
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(n_out, counts)
         seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
-        read = seq is not None and len(seq) > 0
         h, w = self.frame_shape
+        # an empty seq travels as the 1-element spare (nothing is written): one compiled variant per use
         self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
                     self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic),
-                    seq if read else self._no_seq, read)
+                    seq if seq is not None and len(seq) else self._no_seq, seq is not None)
         self.buf = 1 - self.buf
         self.counts = n_out
         return seq

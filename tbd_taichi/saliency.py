@@ -131,9 +131,11 @@ class NumpySaliencyEngine:
         self.ring["se_max"][slot] = nps.max_filter(nps.energy_collection(z, self.r), self.r)
 
     def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
-        """Frame t into ``slot`` with its I_se_max, then the first layer of frame t − 1 into ``dst``."""
+        """Frame t into ``slot`` with its I_se_max, then the first layer of frame t − 1 into ``dst`` (none when
+        every slot is −1)."""
         self.put_and_energy(slot, z)
-        self.first_layer(slots, scale, dst)
+        if max(slots) >= 0:
+            self.first_layer(slots, scale, dst)
 
     def first_layer(self, slots, scale: float, dst: int) -> None:
         """I_acc (Eq. 22, first layer) into acc[dst] and its max filter into acc_max[dst]."""
@@ -273,7 +275,8 @@ class TaichiSaliencyEngine:
                                  self.keep_i_se, self.serial)
 
     def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
-        """:meth:`put_and_energy` and :meth:`first_layer` in one launch."""
+        """:meth:`put_and_energy` and :meth:`first_layer` in one launch (with every slot −1, a first layer of
+        zeros into ``dst``)."""
         f = self.f
         self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f.ring["z"], slot, f.z_rows, f.valid,
                                      f.hs, f.hm, f.line, f.ring_max, f.ring["se_max"], self.n_chunks, self.r, f.i_se,
@@ -284,7 +287,7 @@ class TaichiSaliencyEngine:
                                self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
-        """I_acc2 to the proposal of the frame in ``slot`` in one launch; the proposal comes back as a host
+        """I_acc2 to the proposal of the frame in ``slot`` in two launches; the proposal comes back as a host
         array (:meth:`proposal_copy`), written sparsely into zeros: a new array after the last one was handed
         over, else the last one with its pixels cleared (no allocation per frame when nobody takes them)."""
         ks, f = self.ks, self.f
@@ -296,14 +299,16 @@ class TaichiSaliencyEngine:
         if not reuse:
             self.host_proposal = np.zeros(self.shape, np.float32)
         best = np.empty(f.best.shape)
-        ks.second_layer_and_blocks(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, f.z_rows, slot, snr,
-                                   float(self.shape[0] * self.shape[1]), f.stats, f.ring["z"], f.d, a, self.lef_memory,
-                                   f.valid, f.memory, src, self.memory_slot, f.ring_max, self.n_chunks, self.r,
-                                   accumulated, f.ring["acc"], self.lef_scale, f.row_x, f.row_logw, f.row_lef,
-                                   f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz, f.block_max,
-                                   f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch, f.block_stats, f.proposal,
-                                   f.written, f.n_written, f.best, self.serial, self.host_proposal, best,
-                                   int(reuse))
+        ks.second_layer_and_lef(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, f.z_rows, slot, snr,
+                                float(self.shape[0] * self.shape[1]), f.stats, f.ring["z"], f.d, a, self.lef_memory,
+                                f.valid, f.memory, src, self.memory_slot, f.ring_max, self.n_chunks, self.r,
+                                accumulated, self.serial)
+        ks.proposal_from_candidates(f.acc2, f.ring["acc"], f.ring["acc_max"], slot, f.ring["z"], f.valid, f.d, a,
+                                    f.stats, f.memory, self.memory_slot, self.lef_scale, accumulated, f.row_x,
+                                    f.row_logw, f.row_lef, f.n_row, f.row_base, f.col_block, f.block_offset,
+                                    f.block_nnz, f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch,
+                                    f.block_stats, f.proposal, f.written, f.n_written, f.best, self.serial,
+                                    self.host_proposal, best, int(reuse))
         if not details:
             return {"best_lef": best}
         stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)
@@ -378,11 +383,10 @@ class SaliencyExtractor:
     def push_checked(self, z: np.ndarray) -> list[SaliencyFrame]:
         """:meth:`push` for a frame known to be a finite float32 (H, W) array (the tracker's own z)."""
         t = self.n_pushed
-        if t >= 1:  # frame t in, and the first layer of frame t − 1, in one launch
-            slots, scale = self._slots(t - 1, t)
-            self.engine.put_energy_and_first_layer(t % 3, z, slots, scale, (t - 1) % 3)
-        else:
-            self.engine.put_and_energy(t % 3, z)
+        # frame t in, and the first layer of frame t − 1, in one launch; for frame 0 a first layer of no frames
+        # into slot 2, which frame 2's own first layer overwrites before any read (one kernel to compile, not two)
+        slots, scale = self._slots(t - 1, t) if t >= 1 else ([-1, -1, -1], 1.0)
+        self.engine.put_energy_and_first_layer(t % 3, z, slots, scale, (t - 1) % 3)
         self.n_pushed = t + 1
         return [self._emit(t - 2, t)] if t >= 2 else []
 

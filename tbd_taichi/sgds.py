@@ -439,7 +439,8 @@ class SGDSPF:
             elif len(handed) < len(self.free_groups):
                 drop[k] = True
                 handed.append(k)
-        # the handed PPs' kept particles (PP after PP, each in state order) come back from the same launch
+        # the handed PPs' kept particles (PP after PP, each in state order) come back from the same launch (an
+        # empty list too: one compiled variant of the kernel)
         members, sizes = pool.hand_over(drop, self.pp_index, handed)
         self._start_tracks(f, members, sizes, rng, tracked)
 
