@@ -78,4 +78,5 @@ class NumpyPopulationKernels:
         counts[:] = self.n
 
     def read_seq(self, b, seq) -> None:
-        seq[:] = self.seq[b, self.live_slots()]
+        live = self.seq[b, self.live_slots()]
+        seq[:len(live)] = live  # the front, as the kernel writes it (the step's spare when none is live)
