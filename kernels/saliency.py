@@ -163,13 +163,6 @@ def store_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: 
         store_row_moments(z_rows, zs, y, s1, s2)
 
 
-@ti.kernel
-def load_frame(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32, z_rows: ti.template(),
-               serial: ti.template()):
-    """One launch of :func:`store_frame`."""
-    store_frame(src, z, zs, z_rows, serial)
-
-
 @ti.func
 def energy_row_pass(z: ti.template(), zs: ti.i32, y: ti.i32, hs: ti.template(), hm: ti.template(), c: ti.i32,
                     r: ti.template()):
@@ -237,21 +230,12 @@ def energy_and_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.te
                 column_max(ring, c, y - 2 * r, h, se_max, ds, valid, r)
 
 
-@ti.kernel
-def energy_collection_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.template(), hm: ti.template(),
-                          line: ti.template(), ring: ti.template(), se_max: ti.template(), ds: ti.i32,
-                          n_chunks: ti.i32, r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(),
-                          serial: ti.template()):
-    """One launch of :func:`energy_and_max`."""
-    energy_and_max(z, zs, valid, hs, hm, line, ring, se_max, ds, n_chunks, r, i_se, keep_i_se, serial)
-
-
 @ti.func
 def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, valid: ti.template(),
                     acc: ti.template(), ds: ti.i32, line: ti.template(), ring: ti.template(), acc_max: ti.template(),
                     n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
     """First layer of Eq. 22: I_acc = (Σ of src slots a, b, c3; −1 skipped)·scale into acc[ds] and its
-    (2r+1)² max filter into acc_max[ds], streamed like :func:`energy_collection_max` (r halo rows).
+    (2r+1)² max filter into acc_max[ds], streamed like :func:`energy_and_max` (r halo rows).
     With one slot and scale 1 it is the max filter of that slot."""
     h = src.shape[1]
     ti.loop_config(serialize=serial)
@@ -309,13 +293,6 @@ def second_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale:
         store_row_moments(rows, 0, y, s1, s2)
 
 
-@ti.kernel
-def accumulate_moments(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, dst: ti.template(),
-                       rows: ti.template(), serial: ti.template()):
-    """One launch of :func:`second_layer_sum`."""
-    second_layer_sum(src, a, b, c, scale, dst, rows, serial)
-
-
 @ti.func
 def mean_std(rows: ti.template(), s: ti.i32, count: ti.f64) -> ti.types.vector(2, ti.f64):
     """(mean, N−1 std as MATLAB's std2) from per-row sums rows[s, y], rows added top to bottom."""
@@ -347,13 +324,6 @@ def threshold_and_intensity_range(acc2_rows: ti.template(), z_rows: ti.template(
         stats[4] = acc2[1]
         stats[5] = z[0]
         stats[6] = z[1]
-
-
-@ti.kernel
-def frame_statistics(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32, snr: ti.f64, count: ti.f64,
-                     stats: ti.template()):
-    """One launch of :func:`threshold_and_intensity_range`."""
-    threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
 
 
 @ti.func
@@ -409,17 +379,6 @@ def candidate_pixels(acc2: ti.template(), acc: ti.template(), acc_max: ti.templa
                         row_lef[y, n] = lef[k]
                         n += 1
         n_row[y] = n
-
-
-@ti.kernel
-def segment_and_lef(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), s: ti.i32, z: ti.template(),
-                    valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
-                    memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
-                    row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
-                    serial: ti.template()):
-    """One launch of :func:`candidate_pixels`."""
-    candidate_pixels(acc2, acc, acc_max, s, z, valid, d, a, stats, memory, ms, lef_scale, accumulated, row_x,
-                     row_logw, row_lef, n_row, serial)
 
 
 @ti.func
@@ -574,19 +533,6 @@ def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti
             block_stats[b, 3] = kept
             block_nnz[b] = 0
             block_max[b] = NEG_INF
-
-
-@ti.kernel
-def block_proposal(row_x: ti.template(), row_logw: ti.template(), n_row: ti.template(), row_base: ti.template(),
-                   col_block: ti.template(),
-                   block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
-                   entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
-                   scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
-                   written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
-    """One launch of :func:`proposals_per_block`."""
-    proposals_per_block(row_x, row_logw, n_row, row_base, col_block, block_offset, block_nnz, block_max,
-                        entry_pixel, entry_logw, entry_sal, scratch, block_stats, proposal, written, n_written,
-                        row_lef, best)
 
 
 @ti.func

@@ -267,16 +267,9 @@ class TaichiSaliencyEngine:
         out, self.host_proposal = self.host_proposal, None
         return out if out is not None else backend.to_host(self.f.proposal)
 
-    def put_and_energy(self, slot: int, z: np.ndarray) -> None:
-        ks = self.ks
-        ks.load_frame(to_lanes(z, self.n_lanes, self.host_lanes), self.f.ring["z"], slot, self.f.z_rows, self.serial)
-        ks.energy_collection_max(self.f.ring["z"], slot, self.f.valid, self.f.hs, self.f.hm, self.f.line,
-                                 self.f.ring_max, self.f.ring["se_max"], slot, self.n_chunks, self.r, self.f.i_se,
-                                 self.keep_i_se, self.serial)
-
     def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
-        """:meth:`put_and_energy` and :meth:`first_layer` in one launch (with every slot −1, a first layer of
-        zeros into ``dst``)."""
+        """Frame t into ``slot`` with its I_se_max, and the first layer of frame t − 1 into ``dst`` (as
+        :meth:`first_layer`), in one launch; with every slot −1, a first layer of zeros into ``dst``."""
         f = self.f
         self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f.ring["z"], slot, f.z_rows, f.valid,
                                      f.hs, f.hm, f.line, f.ring_max, f.ring["se_max"], self.n_chunks, self.r, f.i_se,

@@ -83,7 +83,7 @@ def test_energy_collection(rng, shape, chunked, monkeypatch):
     engine.keep_i_se = True
     for kind in KINDS:
         z = random_image(rng, shape, kind)
-        engine.put_and_energy(1, z)
+        engine.put_energy_and_first_layer(1, z, [-1, -1, -1], 1.0, 0)  # the frame alone (no first layer)
         got = from_lanes(engine.f.i_se.to_numpy()[0], shape[1])  # I_se
         np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
         se_max = from_lanes(engine.f.ring["se_max"].to_numpy()[1], shape[1])
