@@ -21,6 +21,7 @@ from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, no
 TILE = 1024
 PAD = 4  # zero border of the weights' frame: a 5×5 window (Eq. 15) that touches the image stays inside it
 WALKS = 4  # interleaved merge walks per tile in draw_parents
+THREAD_SPAN = 512  # Taichi's CPU range-for gives each thread a run of at least this many iterations
 NEG_INF = -3.0e38
 TWO_PI = 2.0 * math.pi
 
@@ -54,14 +55,29 @@ def psf_samples(d0: ti.f32, inv2s2: ti.f32, step: ti.f32, p0: ti.i32, size: ti.i
     return g
 
 
+@ti.func
+def ncv_noise_factors(q1: ti.f32, q2: ti.f32):
+    """Cholesky factor of Eq. 46's NCV noise (T = 1: [[q1/3, q1/2], [q1/2, q1]]) per axis, c11, c21, c22,
+    and √q2 of the intensity walk."""
+    return ti.sqrt(q1 / ti.f32(3.0)), ti.sqrt(q1) * ti.f32(0.8660254037844386), ti.sqrt(q1) * ti.f32(0.5), ti.sqrt(q2)
+
+
+@ti.func
+def psf_constants(psf_sigma: ti.f32, noise_sigma: ti.f32):
+    """Eq. 14–15's constants: 1/(2Σ²), 1/(2πΣ²), 1/σ² and psf_samples' ratio step exp(−2/(2Σ²))."""
+    inv2s2 = ti.f32(1.0) / (ti.f32(2.0) * psf_sigma * psf_sigma)
+    norm = ti.f32(1.0) / (ti.f32(TWO_PI) * psf_sigma * psf_sigma)
+    return inv2s2, norm, ti.f32(1.0) / (noise_sigma * noise_sigma), ti.exp(ti.f32(-2.0) * inv2s2)
+
+
 @ti.data_oriented
 class ParticleKernels(PopulationKernels):
     """Fields and kernels of one particle pool; the scheduler is ``tbd_taichi.particles.ParticlePool``."""
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
-                 flat: bool):
+                 flat: bool, split: int = 1):
         c, g = capacity, n_groups
-        self.capacity, self.serial, self.flat = capacity, serial, flat
+        self.capacity, self.serial, self.flat, self.split = capacity, serial, flat, split
         f32 = lambda *shape: ti.field(ti.f32, shape=shape)  # noqa: E731
         i32 = lambda *shape: ti.field(ti.i32, shape=shape)  # noqa: E731
         f64 = lambda *shape: ti.field(ti.f64, shape=shape)  # noqa: E731
@@ -113,14 +129,36 @@ class ParticleKernels(PopulationKernels):
                     if i - self.off[g] < used:
                         body(i, g, prologue(g, args), args)
         else:
+            self.for_tiles(self.tile_slots, {'resampled': resampled, 'prologue': prologue, 'body': body, 'args': args})
+
+    @ti.func
+    def tile_slots(self, t: ti.i32, loop: ti.template()):
+        """``for_slots`` over tile t (``loop``: its arguments in a dict, since a template argument's
+        tuple cannot hold functions)."""
+        g = self.tile_group[t]
+        end = self.out_tile_end(t) if ti.static(loop['resampled']) else self.tile_end(t)
+        if self.n[g] > 0:
+            gv = loop['prologue'](g, loop['args'])
+            for i in range(self.tile_start[t], end):
+                loop['body'](i, g, gv, loop['args'])
+
+    @ti.func
+    def for_tiles(self, body: ti.template(), args: ti.template()):
+        """body(t, args) for every tile t (the CPU layout).  With ``split`` > 1, thread k of ``split`` takes
+        tiles k, k + split, …: a loop of split·THREAD_SPAN iterations, of which the first of each thread's
+        run does the work, because Taichi's CPU range-for gives a thread runs of at least THREAD_SPAN
+        iterations, so a loop over a few dozen tiles would run on one thread.  Each tile is still reduced
+        serially, so the results do not depend on the split."""
+        if ti.static(self.split > 1):
+            for v in range(self.split * THREAD_SPAN):
+                if v % THREAD_SPAN == 0:
+                    k = v // THREAD_SPAN
+                    for j in range((self.tile_start.shape[0] - k + self.split - 1) // self.split):
+                        body(k + j * self.split, args)
+        else:
             ti.loop_config(serialize=self.serial)
             for t in range(self.tile_start.shape[0]):
-                g = self.tile_group[t]
-                end = self.out_tile_end(t) if ti.static(resampled) else self.tile_end(t)
-                if self.n[g] > 0:
-                    gv = prologue(g, args)
-                    for i in range(self.tile_start[t], end):
-                        body(i, g, gv, args)
+                body(t, args)
 
     @ti.func
     def no_group_values(self, g: ti.i32, args: ti.template()):
@@ -268,10 +306,7 @@ class ParticleKernels(PopulationKernels):
         """Step 2 for existing particles (E 1 → 1, and copied newborns of kind 2), Eqs. 9–10: NCV plus
         Cholesky-factored noise of Q (Eq. 46, T = 1), I ← max(I + √q2·n, i_floor), Tp ← Tp + 1.
         A particle whose position leaves the image (x ∉ [−½, W−½)) gets E = 0."""
-        c11 = ti.sqrt(q1 / ti.f32(3.0))
-        c21 = ti.sqrt(q1) * ti.f32(0.8660254037844386)
-        c22 = ti.sqrt(q1) * ti.f32(0.5)
-        sq2 = ti.sqrt(q2)
+        c11, c21, c22, sq2 = ncv_noise_factors(q1, q2)
         keys = [key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)]
         self.for_slots(False, self.copies_newborns, self.ncv_step,
                        (keys, (c11, c21, c22, sq2, i_floor), b, width, height))
@@ -336,10 +371,7 @@ class ParticleKernels(PopulationKernels):
         over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
         The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five samples
         come from two exponentials by the ratio recurrence of ``psf_samples``."""
-        inv2s2 = ti.f32(1.0) / (ti.f32(2.0) * psf_sigma * psf_sigma)
-        norm = ti.f32(1.0) / (ti.f32(TWO_PI) * psf_sigma * psf_sigma)
-        inv_var = ti.f32(1.0) / (noise_sigma * noise_sigma)
-        step = ti.exp(ti.f32(-2.0) * inv2s2)
+        inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
         args = (b, inv2s2, norm, inv_var, step)
         if ti.static(self.flat):
             self.for_slots(False, self.no_group_values, self.store_log_weight, args)
@@ -385,18 +417,21 @@ class ParticleKernels(PopulationKernels):
     def tile_maxima(self, b: ti.i32, weigh: ti.template(), args: ti.template()):
         """Per tile: the largest log-weight, and the largest among E = 1 particles.  ``weigh``: compute
         and store each log-weight first (``log_weight`` with ``args``), in the same pass."""
-        ti.loop_config(serialize=self.serial)
-        for t in range(self.tile_start.shape[0]):
-            m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                if ti.static(weigh):
-                    self.logw[i] = self.log_weight(i, args)
-                lw = self.logw[i]
-                m = ti.max(m, lw)
-                if self.e[b, i] == 1:
-                    me = ti.max(me, lw)
-            self.tile_max[t] = m
-            self.tile_max_e[t] = me
+        self.for_tiles(self.tile_maximum, {'b': b, 'weigh': weigh, 'args': args})
+
+    @ti.func
+    def tile_maximum(self, t: ti.i32, loop: ti.template()):
+        """``tile_maxima`` for tile t."""
+        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            if ti.static(loop['weigh']):
+                self.logw[i] = self.log_weight(i, loop['args'])
+            lw = self.logw[i]
+            m = ti.max(m, lw)
+            if self.e[loop['b'], i] == 1:
+                me = ti.max(me, lw)
+        self.tile_max[t] = m
+        self.tile_max_e[t] = me
 
     @ti.func
     def group_maxima(self):
@@ -414,19 +449,22 @@ class ParticleKernels(PopulationKernels):
     def tile_cumulative(self):
         """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64.  E = 0
         particles have log-weight 0, so their weight exp(−gmax) is computed once per tile."""
-        ti.loop_config(serialize=self.serial)
-        for t in range(self.tile_start.shape[0]):
-            gmax = ti.cast(self.gmax[self.tile_group[t]], ti.f64)
-            w0 = ti.exp(-gmax)
-            s = ti.cast(0.0, ti.f64)
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                lw = self.logw[i]
-                w = w0
-                if lw != 0.0:
-                    w = ti.exp(ti.cast(lw, ti.f64) - gmax)
-                s += w
-                self.cum[i] = s
-            self.tile_total[t] = s
+        self.for_tiles(self.tile_cumulative_sum, ())
+
+    @ti.func
+    def tile_cumulative_sum(self, t: ti.i32, _: ti.template()):
+        """``tile_cumulative`` for tile t."""
+        gmax = ti.cast(self.gmax[self.tile_group[t]], ti.f64)
+        w0 = ti.exp(-gmax)
+        s = ti.cast(0.0, ti.f64)
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            lw = self.logw[i]
+            w = w0
+            if lw != 0.0:
+                w = ti.exp(ti.cast(lw, ti.f64) - gmax)
+            s += w
+            self.cum[i] = s
+        self.tile_total[t] = s
 
     @ti.func
     def exclusive_tile_prefix(self, g: ti.i32, totals: ti.template(), prefix: ti.template()) -> ti.f64:
@@ -504,17 +542,19 @@ class ParticleKernels(PopulationKernels):
     def tile_spacings(self, seed: ti.u32, frame: ti.i32):
         """Multinomial resampling, part 1: Exp(1) spacings (f64, by the ziggurat: no logarithm for 99 %
         of them) over each group's output slots, summed within tiles (spc), with the tile totals."""
-        key = key_prefix(seed, frame, S_RESAMPLE)
+        self.for_tiles(self.tile_spacing_sums, key_prefix(seed, frame, S_RESAMPLE))
+
+    @ti.func
+    def tile_spacing_sums(self, t: ti.i32, key: ti.template()):
+        """``tile_spacings`` for tile t."""
         w, k, f = ti.static(self.exponential.w, self.exponential.k, self.exponential.f)
-        ti.loop_config(serialize=self.serial)
-        for t in range(self.tile_start.shape[0]):
-            g = self.tile_group[t]
-            s = ti.cast(0.0, ti.f64)
-            if self.n[g] > 0:
-                for i in range(self.tile_start[t], self.out_tile_end(t)):
-                    s += exponential_at(w, k, f, key, i)
-                    self.spc[i] = s
-            self.tile_spc[t] = s
+        g = self.tile_group[t]
+        s = ti.cast(0.0, ti.f64)
+        if self.n[g] > 0:
+            for i in range(self.tile_start[t], self.out_tile_end(t)):
+                s += exponential_at(w, k, f, key, i)
+                self.spc[i] = s
+        self.tile_spc[t] = s
 
     @ti.func
     def group_spacings(self, seed: ti.u32, frame: ti.i32):
@@ -536,26 +576,28 @@ class ParticleKernels(PopulationKernels):
         (seed, frame, S_SYSTEMATIC, g).  Sorted u lets each tile binary-search its first parents and
         walk forward from there.  (Gathering each tile's outputs right after its walk was slower than
         a pass of its own.)"""
-        key = key_prefix(seed, frame, S_SYSTEMATIC)
-        ti.loop_config(serialize=self.serial)
-        for t in range(self.tile_start.shape[0]):
-            g = self.tile_group[t]
-            i0, i1, n = self.tile_start[t], self.out_tile_end(t), self.n[g]
-            if n > 0 and i0 < i1:
-                off, total = self.off[g], self.gtotal[g]
-                last = off + n - 1
-                u0, scale, base = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
-                if ti.static(systematic):  # one uniform per group
-                    u0, scale = uniform_f64_at(key, g), ti.cast(self.n_out[g], ti.f64)
+        self.for_tiles(self.tile_parents, {'systematic': systematic, 'key': key_prefix(seed, frame, S_SYSTEMATIC)})
+
+    @ti.func
+    def tile_parents(self, t: ti.i32, loop: ti.template()):
+        """``draw_parents`` for tile t's output slots."""
+        g = self.tile_group[t]
+        i0, i1, n = self.tile_start[t], self.out_tile_end(t), self.n[g]
+        if n > 0 and i0 < i1:
+            off, total = self.off[g], self.gtotal[g]
+            last = off + n - 1
+            u0, scale, base = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+            if ti.static(loop['systematic']):  # one uniform per group
+                u0, scale = uniform_f64_at(loop['key'], g), ti.cast(self.n_out[g], ti.f64)
+            else:
+                base, scale = self.tile_spc_prefix[t], self.gspc[g]
+            to_weight = total / scale  # one division per tile, not per output
+            for i in range(i0, i1):  # the positions v_m = u_m·Σw, into spc
+                if ti.static(loop['systematic']):
+                    self.spc[i] = (ti.cast(i - off, ti.f64) + u0) * to_weight
                 else:
-                    base, scale = self.tile_spc_prefix[t], self.gspc[g]
-                to_weight = total / scale  # one division per tile, not per output
-                for i in range(i0, i1):  # the positions v_m = u_m·Σw, into spc
-                    if ti.static(systematic):
-                        self.spc[i] = (ti.cast(i - off, ti.f64) + u0) * to_weight
-                    else:
-                        self.spc[i] = (base + self.spc[i]) * to_weight
-                self.merge_parents(g, i0, i1, last)
+                    self.spc[i] = (base + self.spc[i]) * to_weight
+            self.merge_parents(g, i0, i1, last)
 
     @ti.func
     def merge_parents(self, g: ti.i32, i0: ti.i32, i1: ti.i32, last: ti.i32):
@@ -622,15 +664,98 @@ class ParticleKernels(PopulationKernels):
              q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32,
              noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
              z: ti.types.ndarray(dtype=ti.f32, ndim=2), n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
-             systematic: ti.template(), seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template()):
+             systematic: ti.template(), seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(),
+             fused: ti.template()):
         """Steps 1–5 in one launch, for a filter with nothing to do between them (a launch costs
         tens of µs on the CPU backend); with ``read_seq`` also the resampled particles' Seq in state
-        order into ``seq`` (:meth:`read_seq`, which the searching PFs need next)."""
-        self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
-        self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
-        self.resample_particles(seed, frame, b, n_out, systematic)
+        order into ``seq`` (:meth:`read_seq`, which the searching PFs need next); ``fused``: as
+        :meth:`fused_step` (CPU, tile loops split, no kind 2 group)."""
+        if ti.static(fused):
+            self.fused_step(seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z,
+                            n_out, systematic)
+        else:
+            self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
+            self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
+            self.resample_particles(seed, frame, b, n_out, systematic)
         if ti.static(read_seq):
             self.seq_in_state_order(1 - b, seq)
+
+    @ti.func
+    def fused_step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(), q1: ti.f32, q2: ti.f32,
+                   i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32,
+                   best: ti.template(), z: ti.template(), n_out: ti.template(), systematic: ti.template()):
+        """Steps 1–5 for a pool without copied newborns (kind 2) whose tile loops are split over the
+        threads: three passes over the tiles instead of eight, since each parallel pass costs a start
+        of Taichi's thread pool (about 50 µs on the 2-core VM).  Pass 1: existence, top-up, newborn
+        draws, propagation, log-weight and tile maxima, slot by slot (no slot reads another: only kind 2
+        copies do); pass 2: each tile's cumulative weights and spacings; pass 3: each tile's parents,
+        then the gather of its outputs.  Serial steps between them combine the tiles of each group.
+        The same operations on the same slots as the unfused step, so the same bits."""
+        self.load_frame(z)
+        self.store_counts(counts)
+        self.for_tiles(self.predicted_tile, (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma))
+        self.group_maxima()
+        ti.loop_config(serialize=True)
+        for g in range(best.shape[0]):
+            best[g] = self.gmax_e[g]
+        self.set_out_counts(n_out)
+        self.for_tiles(self.weighted_tile, {'systematic': systematic, 'key': key_prefix(seed, frame, S_RESAMPLE)})
+        self.group_prefix()
+        if ti.static(not systematic):
+            self.group_spacings(seed, frame)
+        self.for_tiles(self.resampled_tile, {'systematic': systematic, 'b': b,
+                                             'key': key_prefix(seed, frame, S_SYSTEMATIC)})
+        self.commit_counts()
+
+    @ti.func
+    def predicted_tile(self, t: ti.i32, loop: ti.template()):
+        """``fused_step``'s pass 1 over tile t: Eqs. 7–8 for the slots live before the top-up (the added
+        ones become initial particles), Eq. 34's draws, Eqs. 9–10, Eq. 15 and the tile maxima."""
+        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop
+        g = self.tile_group[t]
+        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+        if self.n[g] > 0:
+            # every loop-invariant value is made here: one made before the parallel loop would reach it
+            # through memory, reloaded at each use after a store into the pool
+            rates = self.existence_rates(g, ())
+            first_added = self.first_added_slot(g, ())
+            exist = (key_prefix(seed, frame, S_EXIST), b)
+            birth = ([key_prefix(seed, frame, st) for st in ti.static(BIRTH_STREAMS)], b, width)
+            c11, c21, c22, sq2 = ncv_noise_factors(q1, q2)
+            noise = ([key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)], (c11, c21, c22, sq2, i_floor),
+                     b, width, height)
+            inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
+            weight = (b, inv2s2, norm, inv_var, step)
+            for i in range(self.tile_start[t], self.tile_end(t)):
+                if i < first_added:
+                    self.existence_step(i, g, rates, exist)
+                else:
+                    self.born[i] = 2
+                self.newborn_draw(i, g, 0, birth)
+                self.ncv_step(i, g, 0, noise)
+                lw = self.log_weight(i, weight)
+                self.logw[i] = lw
+                m = ti.max(m, lw)
+                if self.e[b, i] == 1:
+                    me = ti.max(me, lw)
+        self.tile_max[t] = m
+        self.tile_max_e[t] = me
+
+    @ti.func
+    def weighted_tile(self, t: ti.i32, loop: ti.template()):
+        """``fused_step``'s pass 2 over tile t: Eq. 17 within the tile, and (multinomial) its spacings."""
+        self.tile_cumulative_sum(t, ())
+        if ti.static(not loop['systematic']):
+            self.tile_spacing_sums(t, loop['key'])
+
+    @ti.func
+    def resampled_tile(self, t: ti.i32, loop: ti.template()):
+        """``fused_step``'s pass 3 over tile t: Eq. 18's parents of its output slots, then their states."""
+        self.tile_parents(t, loop)
+        g = self.tile_group[t]
+        if self.n[g] > 0:
+            for i in range(self.tile_start[t], self.out_tile_end(t)):
+                self.take_parent(i, g, 0, loop['b'])
 
     @ti.func
     def resample_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(),
@@ -714,19 +839,22 @@ class ParticleKernels(PopulationKernels):
     def tile_sums(self, b: ti.i32):
         """Per tile (serially, in slot order): the sums behind Eq. 19, P(E), mean Tp and the covariances of
         all particles and of the E = 1 particles."""
-        ti.loop_config(serialize=self.serial)
-        for t in range(self.tile_start.shape[0]):
-            acc = ti.Vector([0.0] * N_MOMENTS, dt=ti.f64)
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                e = ti.cast(self.e[b, i], ti.f64)
-                x = ti.cast(self.x[b, i], ti.f64)
-                y = ti.cast(self.y[b, i], ti.f64)
-                acc += ti.Vector([1.0, e, e * x, e * ti.cast(self.vx[b, i], ti.f64), e * y,
-                                  e * ti.cast(self.vy[b, i], ti.f64), e * ti.cast(self.inten[b, i], ti.f64),
-                                  ti.cast(self.tp[b, i], ti.f64), x, y, x * x, y * y, x * y,
-                                  e * x * x, e * y * y, e * x * y], dt=ti.f64)
-            for k in ti.static(range(N_MOMENTS)):
-                self.tile_moments[t, k] = acc[k]
+        self.for_tiles(self.tile_moment_sums, b)
+
+    @ti.func
+    def tile_moment_sums(self, t: ti.i32, b: ti.template()):
+        """``tile_sums`` for tile t."""
+        acc = ti.Vector([0.0] * N_MOMENTS, dt=ti.f64)
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            e = ti.cast(self.e[b, i], ti.f64)
+            x = ti.cast(self.x[b, i], ti.f64)
+            y = ti.cast(self.y[b, i], ti.f64)
+            acc += ti.Vector([1.0, e, e * x, e * ti.cast(self.vx[b, i], ti.f64), e * y,
+                              e * ti.cast(self.vy[b, i], ti.f64), e * ti.cast(self.inten[b, i], ti.f64),
+                              ti.cast(self.tp[b, i], ti.f64), x, y, x * x, y * y, x * y,
+                              e * x * x, e * y * y, e * x * y], dt=ti.f64)
+        for k in ti.static(range(N_MOMENTS)):
+            self.tile_moments[t, k] = acc[k]
 
     @ti.kernel
     def estimates(self, b: ti.i32, moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):

@@ -41,6 +41,17 @@ SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a paralle
 # with at most this many CPU threads the particle loops stay serial at any size: on the 2-core VM a step of
 # 392,000 particles in 49 groups (1024×1024 at the SNR 1.4 preset) takes 29 ms serial and 37 ms parallel
 SERIAL_THREADS = 2
+SPLIT_PARTICLES = 1 << 14
+
+
+def tile_threads(capacity: int, n_tiles: int, flat: bool) -> int:
+    """CPU threads that share the tile loops (1: serial): the pinned workers (``backend.pinned_workers``),
+    for pools of at least SPLIT_PARTICLES slots.  Unpinned, the workers often share one CPU and a
+    split loop only pays the thread pool's start."""
+    workers = len(backend.pinned_workers())
+    if flat or capacity < SPLIT_PARTICLES or workers < 2:
+        return 1
+    return min(workers, n_tiles)
 
 
 def one_thread_per_slot(arch: str) -> bool:
@@ -107,15 +118,17 @@ class ParticlePool:
         gt0 = np.searchsorted(tile_group, np.arange(self.n_groups)).astype(np.int32)
         gt1 = np.searchsorted(tile_group, np.arange(self.n_groups), side="right").astype(np.int32)
         self.map_capacity = max(int(map_capacity), 1)
-        serial, flat = self.capacity <= SERIAL_PARTICLES, False
+        serial, flat, split = self.capacity <= SERIAL_PARTICLES, False, 1
         if engine == "taichi":
             backend.ensure_init(arch)
             flat = one_thread_per_slot(backend.current().arch)
             serial = not flat and (serial or backend.cpu_threads() <= SERIAL_THREADS)
+            split = tile_threads(self.capacity, len(tiles), flat)
             from .kernels.particles import ParticleKernels as Kernels
         else:
             from .numpy_kernels.particles import NumpyParticleKernels as Kernels
-        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat)
+        self.split = split  # threads sharing the tile loops (kernels.particles.ParticleKernels.for_tiles)
+        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat, split)
         if engine == "taichi":
             from .launch import Launcher
 
@@ -458,7 +471,8 @@ class ParticlePool:
         # an empty seq travels as the 1-element spare (nothing is written): one compiled variant per use
         self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
                     self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic),
-                    seq if seq is not None and len(seq) else self._no_seq, seq is not None)
+                    seq if seq is not None and len(seq) else self._no_seq, seq is not None,
+                    self.split > 1 and not (self.kinds == BIRTH_KINDS["copy"]).any())
         self.buf = 1 - self.buf
         self.counts = n_out
         return seq

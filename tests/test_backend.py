@@ -93,3 +93,45 @@ def test_host_copies_of_vector_fields_and_arrays():
     copy = backend.to_host(arr)
     copy[0] = 9
     np.testing.assert_array_equal(arr, [1, 2, 3, 4])
+
+
+def test_cpu_workers_are_pinned_one_per_cpu_when_they_use_every_cpu():
+    """With as many workers as CPUs (≥ 2) each worker thread is pinned to its own CPU, and these threads
+    do the work of a parallel loop; fewer threads than CPUs are left to the scheduler."""
+    import os
+
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    if len(cpus) < 2 or not os.path.isdir("/proc/self/task"):
+        pytest.skip("needs Linux and at least two CPUs")
+    try:
+        backend.init("cpu", threads=len(cpus))
+        workers = backend.pinned_workers()
+        assert [os.sched_getaffinity(t) for t in workers] == [{c} for c in cpus]
+        x = ti.field(ti.f32, 1 << 22)
+
+        @ti.kernel
+        def busy():
+            for i in range(x.shape[0]):
+                v = ti.cast(i, ti.f32)
+                for _ in range(30):
+                    v = ti.sin(v) + 1.0
+                x[i] = v
+
+        def cpu_ticks(tid):  # utime + stime of a thread
+            fields = open(f"/proc/self/task/{tid}/stat").read().rsplit(")", 1)[1].split()
+            return int(fields[11]) + int(fields[12])
+
+        before = [cpu_ticks(t) for t in workers]
+        for _ in range(3):
+            busy()
+        ti.sync()
+        assert sum(cpu_ticks(t) for t in workers) > sum(before)  # the pinned threads are Taichi's workers
+        backend.init("cpu", threads=1)
+        assert backend.pinned_workers() == []
+    finally:
+        tbd_taichi.init(TEST_ARCH)
+
+
+def test_pinning_can_be_turned_off(monkeypatch):
+    monkeypatch.setenv("TBD_TAICHI_PIN_THREADS", "0")
+    assert backend.pin_worker_threads(set(), 2) == []

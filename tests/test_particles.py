@@ -471,6 +471,69 @@ def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the split tile loops are the CPU's")
+@pytest.mark.parametrize("threads", [1, 2])
+def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, threads):
+    """Tile loops split over two threads (forced: ``tile_threads`` splits only pools of SPLIT_PARTICLES
+    slots or more, and only with pinned workers) against the serial layout, on one and two threads:
+    the fused one-launch step of a pool without copies (a top-up, an empty group, multinomial and
+    systematic resampling, the Seq read-out) and the split, unfused loops of a pool with copies."""
+    import tbd_taichi.particles as particles
+
+    caps = [2100, 1500, 300, 1100]  # 3 + 2 + 1 + 2 tiles: both threads get partial tiles
+    states = random_states(rng, caps, SHAPE)
+    z = rng.standard_normal(SHAPE).astype(np.float32)
+    z[0, 0] = 60.0
+
+    def run(copies):
+        p = ParticlePool(caps, SHAPE, engine="taichi", seed=9, map_capacity=8)
+        p.configure_groups([0, 3], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([1], "map", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([2], "copy" if copies else "uniform", pb=0.3, pd=0.2)
+        p.set_proposal_map({1: (np.array([5, 40, 300]), np.array([0.2, 0.5, 0.3]))})
+        p.set_state(states)
+        out = []
+        for f in range(5):
+            seq = np.empty(p.capacity, np.int32)
+            top_up = [2100, 1500, 300, 1100] if f == 1 else None
+            n_out = [2000, 0, 280, 1000] if f == 2 else None
+            got = p.step(f, z, n_out=n_out, systematic=f == 4, top_up=top_up, seq_out=seq)
+            out.append((p.state(), got.copy(), p.estimates().x, p.max_log_weights(), p._get("gmax")))
+        return out, p.split
+
+    try:
+        tbd_taichi.init("cpu", threads=threads)
+        for copies in (False, True):
+            serial, one = run(copies)
+            monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2)
+            split, two = run(copies)
+            monkeypatch.undo()
+            assert (one, two) == (1, 2)
+            for (st, *rest_t), (sp, *rest_s) in zip(serial, split):
+                for key in st:
+                    np.testing.assert_array_equal(st[key], sp[key], err_msg=key)
+                for a, b in zip(rest_t, rest_s):
+                    np.testing.assert_array_equal(a, b)
+    finally:
+        tbd_taichi.init(TEST_ARCH)
+
+
+def test_tile_loops_split_only_for_large_pools_with_pinned_workers(monkeypatch):
+    """``tile_threads``: 1 (serial) without pinned workers, for small pools and on GPUs; else the workers,
+    at most one per tile."""
+    import tbd_taichi.particles as particles
+    from tbd_taichi import backend
+
+    big = particles.SPLIT_PARTICLES
+    monkeypatch.setattr(backend, "pinned_workers", lambda: [])
+    assert particles.tile_threads(big, 40, False) == 1
+    monkeypatch.setattr(backend, "pinned_workers", lambda: [11, 12, 13])
+    assert particles.tile_threads(big, 40, False) == 3
+    assert particles.tile_threads(big, 2, False) == 2
+    assert particles.tile_threads(big - 1, 40, False) == 1
+    assert particles.tile_threads(big, 40, True) == 1
+
+
 @pytest.mark.parametrize("engine", ["taichi", "numpy"])
 def test_keep_removes_particles_in_place_and_in_order(rng, engine):
     """ParticlePool.keep against the host reference load_states(state[keep]); groups of all sizes, empty ones included."""

@@ -34,7 +34,7 @@ class NumpyParticleKernels(NumpyPopulationKernels):
     """Arrays and vectorised steps of one particle pool (same names as the Taichi class)."""
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
-                 flat: bool):
+                 flat: bool, split: int = 1):
         c, g = capacity, n_groups
         self.capacity = capacity
         for name in ("x", "vx", "y", "vy", "inten"):
@@ -299,7 +299,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.store_counts(counts)
 
     def step(self, seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z, n_out,
-             systematic, seq, read_seq) -> None:
+             systematic, seq, read_seq, fused=False) -> None:
+        """``fused`` changes only how the Taichi kernel orders its loops, not the result."""
         self.predict(seed, frame, b, counts, q1, q2, i_floor, width, height)
         self.weigh(b, psf_sigma, noise_sigma, best, z)
         self.resample(seed, frame, b, n_out, systematic)
