@@ -24,7 +24,8 @@ FRONTEND_PROCESS_HELP = ("run normalisation and saliency in a second process, on
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--arch", default="cpu", choices=backend.ARCH_NAMES, help=ARCH_HELP)
-    parser.add_argument("--threads", type=int, default=None, help="CPU threads for Taichi (default: all cores, each worker pinned to one; fewer leaves them unpinned)")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="CPU threads for Taichi (default: all cores, each worker pinned to one; fewer: unpinned)")
 
 
 def _truth_csv_path(out: Path) -> Path:
