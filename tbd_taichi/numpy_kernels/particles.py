@@ -31,7 +31,8 @@ def psf_samples(d0: np.ndarray, inv2s2, step, pixels: np.ndarray, size: int) -> 
 
 
 class NumpyParticleKernels(NumpyPopulationKernels):
-    """Arrays and vectorised steps of one particle pool (same names as the Taichi class)."""
+    """Arrays and vectorised steps of one particle pool (same names as the Taichi class; ``serial``, ``flat``
+    and ``split``, the Taichi kernels' loop layout, do not change the results and are not used here)."""
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
                  flat: bool, split: int = 1):
