@@ -715,8 +715,8 @@ class ParticleKernels(PopulationKernels):
         g = self.tile_group[t]
         m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
         if self.n[g] > 0:
-            # every loop-invariant value is made here: one made before the parallel loop would reach it
-            # through memory, reloaded at each use after a store into the pool
+            # the keys and constants of each stage's loop, per tile (a few hashes; made once before the
+            # parallel loop instead, the pass took as long)
             rates = self.existence_rates(g, ())
             first_added = self.first_added_slot(g, ())
             exist = (key_prefix(seed, frame, S_EXIST), b)
@@ -752,10 +752,8 @@ class ParticleKernels(PopulationKernels):
     def resampled_tile(self, t: ti.i32, loop: ti.template()):
         """``fused_step``'s pass 3 over tile t: Eq. 18's parents of its output slots, then their states."""
         self.tile_parents(t, loop)
-        g = self.tile_group[t]
-        if self.n[g] > 0:
-            for i in range(self.tile_start[t], self.out_tile_end(t)):
-                self.take_parent(i, g, 0, loop['b'])
+        self.tile_slots(t, {'resampled': True, 'prologue': self.no_group_values, 'body': self.take_parent,
+                            'args': loop['b']})
 
     @ti.func
     def resample_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(),
