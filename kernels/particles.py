@@ -691,7 +691,8 @@ class ParticleKernels(PopulationKernels):
         another: only kind 2 copies do; one loop per stage ran pass 1 in 1.80 ms, one loop doing all
         stages slot by slot in 2.0 ms: the kernel profiler, 1.4 preset at 320×256); pass 2: each tile's
         cumulative weights and spacings; pass 3: each tile's parents, then the gather of its outputs.
-        Serial steps between them combine the tiles of each group.  The same operations on the same slots as the unfused step, so the same bits."""
+        Serial steps between them combine the tiles of each group.  The same operations on the same
+        slots as the unfused step, so the same bits."""
         self.load_frame(z)
         self.store_counts(counts)
         self.for_tiles(self.predicted_tile, (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma))
