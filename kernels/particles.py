@@ -19,7 +19,7 @@ from .populations import PopulationKernels
 from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 TILE = 1024
-PAD = 4  # zero border of the weights' frame: a 5×5 window (Eq. 15) that touches the image stays inside it
+PAD = 4  # zero border of the frame the weights read: a 5×5 window (Eq. 15) that touches the image stays inside it
 WALKS = 4  # interleaved merge walks per tile in draw_parents
 THREAD_SPAN = 512  # Taichi's CPU range-for gives each thread a run of at least this many iterations
 NEG_INF = -3.0e38
@@ -78,6 +78,7 @@ class ParticleKernels(PopulationKernels):
                  flat: bool, split: int = 1):
         c, g = capacity, n_groups
         self.capacity, self.serial, self.flat, self.split = capacity, serial, flat, split
+        self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
         f32 = lambda *shape: ti.field(ti.f32, shape=shape)  # noqa: E731
         i32 = lambda *shape: ti.field(ti.i32, shape=shape)  # noqa: E731
         f64 = lambda *shape: ti.field(ti.f64, shape=shape)  # noqa: E731
@@ -99,7 +100,6 @@ class ParticleKernels(PopulationKernels):
         self.tile_moments = f64(n_tiles, N_MOMENTS)
         self.map_pixel, self.map_seq, self.map_cdf = i32(map_capacity), i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
-        self.z = f32(frame_shape[0] + 2 * PAD, frame_shape[1] + 2 * PAD)  # frame with a zero border
         self.population_fields(c, frame_shape)
         self.normal, self.exponential = NormalTables(), ExponentialTables()
 
@@ -357,27 +357,20 @@ class ParticleKernels(PopulationKernels):
     # ------------------------------------------------------------ Eqs. 11–15
 
     @ti.func
-    def load_frame(self, z: ti.template()):
-        """The normalised frame z (H, W) into the middle of the zero-bordered field the weights read."""
-        ti.loop_config(serialize=self.serial)
-        for y in range(z.shape[0]):
-            for x in range(z.shape[1]):
-                self.z[y + PAD, x + PAD] = z[y, x]
-
-    @ti.func
-    def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32):
+    def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, zp: ti.template()):
         """Step 3, Eq. 15 in the log domain: for E = 1,
         log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
         over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
         The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five samples
-        come from two exponentials by the ratio recurrence of ``psf_samples``."""
+        come from two exponentials by the ratio recurrence of ``psf_samples``.  ``zp``: the frame with a
+        zero border of PAD pixels (H + 2·PAD, W + 2·PAD)."""
         inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
-        args = (b, inv2s2, norm, inv_var, step)
+        values = (b, inv2s2, norm, inv_var, step)
         if ti.static(self.flat):
-            self.for_slots(False, self.no_group_values, self.store_log_weight, args)
+            self.for_slots(False, self.no_group_values, self.store_log_weight, {'values': values, 'zp': zp})
             self.tile_maxima(b, False, ())
         else:  # the tile maxima of step 4 in the same pass (one pass over the pool fewer)
-            self.tile_maxima(b, True, args)
+            self.tile_maxima(b, True, {'values': values, 'zp': zp})
 
     @ti.func
     def store_log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
@@ -386,9 +379,11 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def log_weight(self, i: ti.i32, args: ti.template()) -> ti.f32:
-        """Eq. 15's log-weight of slot i (0 for E = 0)."""
-        b, inv2s2, norm, inv_var, step = args
-        h, w = ti.static(self.z.shape[0] - 2 * PAD, self.z.shape[1] - 2 * PAD)
+        """Eq. 15's log-weight of slot i (0 for E = 0); ``args``: {'values': the constants of
+        ``log_weights``, 'zp': the bordered frame} (a dict: a tuple made in a kernel cannot hold an array)."""
+        b, inv2s2, norm, inv_var, step = args['values']
+        zp = ti.static(args['zp'])
+        h, w = ti.static(self.frame_shape)
         lw = ti.f32(0.0)
         if self.e[b, i] == 1:
             x, y = self.x[b, i], self.y[b, i]
@@ -405,7 +400,7 @@ class ParticleKernels(PopulationKernels):
             for j in ti.static(range(5)):
                 row = ti.f32(0.0)
                 for k in ti.static(range(5)):
-                    row += gx[k] * self.z[r0 + j, c0 + k]
+                    row += gx[k] * zp[r0 + j, c0 + k]
                 sz += gy[j] * row
             a = self.inten[b, i] * norm
             lw = (a * sz - ti.f32(0.5) * a * a * gx.dot(gx) * gy.dot(gy)) * inv_var
@@ -509,11 +504,9 @@ class ParticleKernels(PopulationKernels):
     @ti.func
     def weigh_particles(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.template(),
                         z: ti.template()):
-        """Steps 3–4 on the normalised frame z: log-weights (Eq. 15), their normalisation, and each
-        group's largest E = 1 log-weight into ``best``.  (Reading z in place instead of a field is
-        slower: the compiler reloads an argument array's pointer after every store into the pool.)"""
-        self.load_frame(z)
-        self.log_weights(b, psf_sigma, noise_sigma)
+        """Steps 3–4 on the normalised frame z (zero-bordered: H + 2·PAD, W + 2·PAD): log-weights
+        (Eq. 15), their normalisation, and each group's largest E = 1 log-weight into ``best``."""
+        self.log_weights(b, psf_sigma, noise_sigma, z)
         self.normalise_weights()
         ti.loop_config(serialize=True)
         for g in range(best.shape[0]):
@@ -693,9 +686,9 @@ class ParticleKernels(PopulationKernels):
         cumulative weights and spacings; pass 3: each tile's parents, then the gather of its outputs.
         Serial steps between them combine the tiles of each group.  The same operations on the same
         slots as the unfused step, so the same bits."""
-        self.load_frame(z)
         self.store_counts(counts)
-        self.for_tiles(self.predicted_tile, (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma))
+        self.for_tiles(self.predicted_tile,
+                       {'values': (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma), 'z': z})
         self.group_maxima()
         ti.loop_config(serialize=True)
         for g in range(best.shape[0]):
@@ -713,7 +706,7 @@ class ParticleKernels(PopulationKernels):
     def predicted_tile(self, t: ti.i32, loop: ti.template()):
         """``fused_step``'s pass 1 over tile t: Eqs. 7–8 for the slots live before the top-up (the added
         ones become initial particles), Eq. 34's draws, Eqs. 9–10, Eq. 15 and the tile maxima."""
-        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop
+        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
         g = self.tile_group[t]
         m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
         if self.n[g] > 0:
@@ -738,7 +731,7 @@ class ParticleKernels(PopulationKernels):
             for i in range(self.tile_start[t], self.tile_end(t)):
                 self.ncv_step(i, g, 0, noise)
             for i in range(self.tile_start[t], self.tile_end(t)):
-                lw = self.log_weight(i, weight)
+                lw = self.log_weight(i, {'values': weight, 'zp': loop['z']})
                 self.logw[i] = lw
                 m = ti.max(m, lw)
                 if self.e[b, i] == 1:

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
                                   S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, NOISE_STREAMS,
-                                  S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI)
+                                  PAD, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI)
 from ..particles import STATE
 from . import rng
 from .populations import NumpyPopulationKernels
@@ -171,6 +171,8 @@ class NumpyParticleKernels(NumpyPopulationKernels):
     # ------------------------------------------------------------ Eqs. 11–15
 
     def log_weights(self, b: int, psf_sigma: float, noise_sigma: float, z: np.ndarray) -> None:
+        """Eq. 15 for every live particle; ``z`` zero-bordered by PAD pixels, as the kernel reads it."""
+        z = z[PAD:-PAD, PAD:-PAD]
         i = self.live_slots()
         self.logw[i] = 0.0
         i = i[self.e[b, i] == 1]
