@@ -387,6 +387,23 @@ def test_weights_use_the_frame_as_it_was_loaded(rng):
     assert np.abs(t.state()["logw"]).max() > 0
 
 
+def test_frame_of_another_shape_is_refused_and_the_border_stays_zero(rng):
+    """A frame whose shape is not the pool's gets an error naming both shapes, for load_frame and step
+    alike; a frame of ones leaves the weights' zero border as it was (the kernels read through it)."""
+    from tbd_taichi.kernels.particles import PAD
+
+    (t, n), z = make_pools(rng)
+    for pool in (t, n):
+        with pytest.raises(ParameterError, match=r"shape \(23, 30\).*built for \(23, 31\)"):
+            pool.load_frame(z[:, :-1])
+        with pytest.raises(ParameterError, match=r"shape \(31, 23\)"):
+            pool.step(0, z.T)
+        pool.load_frame(np.ones(SHAPE))
+        bordered = pool._z
+        assert bordered.shape == (SHAPE[0] + 2 * PAD, SHAPE[1] + 2 * PAD)
+        assert bordered[PAD:-PAD, PAD:-PAD].min() == 1.0 and bordered.sum() == SHAPE[0] * SHAPE[1]
+
+
 def test_same_results_with_one_and_two_threads(rng, monkeypatch):
     """The parallel loops (forced: pools this small, or CPUs with two threads, run serially) give the
     same particles with one worker thread and with two."""
