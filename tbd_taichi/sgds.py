@@ -187,6 +187,14 @@ def near_any(points: list, x: float, y: float) -> bool:
     return any(math.hypot(x - px, y - py) < DUPLICATE_RADIUS for px, py in points)
 
 
+def near_any_of(points: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """:func:`near_any` for each of the positions (x[k], y[k]) at once (bool array)."""
+    if not points or not len(x):
+        return np.zeros(len(x), bool)
+    p = np.asarray(points, np.float64)
+    return (np.hypot(x[:, None] - p[:, 0], y[:, None] - p[:, 1]) < DUPLICATE_RADIUS).any(axis=1)
+
+
 def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
     """Indices that bring a PP of n particles to ``size`` (Algorithm 2's "random eliminating or
     copying"): a random subset without replacement if n ≥ size, else all plus random copies.
@@ -433,8 +441,9 @@ class SGDSPF:
         drop = np.zeros(len(counts), bool)
         handed = []  # the PPs handed over, in PP order
         tracked = [t.last_xy() for t in self.active]
-        for k in np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0)):
-            if near_any(tracked, px[k], py[k]):  # the target is tracked already
+        potential = np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0))
+        for k, near in zip(potential.tolist(), near_any_of(tracked, px[potential], py[potential]).tolist()):
+            if near:  # the target is tracked already
                 drop[k] = True
             elif len(handed) < len(self.free_groups):
                 drop[k] = True

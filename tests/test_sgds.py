@@ -469,3 +469,22 @@ def test_min_peak_z_reports_only_tracks_that_bright():
     assert rows[4.0] == [] and whole[4.0] == 0
     with pytest.raises(tbd.ParameterError, match="min_peak_z"):
         SGDSPF((50, 50), min_peak_z=-1.0)
+
+
+def test_near_any_of_agrees_with_near_any_point_by_point(rng):
+    """The vectorised duplicate test gives near_any's answer at every position, with points exactly at,
+    just inside and just outside the radius, and for no points or no positions."""
+    from tbd_taichi.sgds import DUPLICATE_RADIUS, near_any, near_any_of
+
+    points = [(10.0, 10.0)] + [(float(x), float(y)) for x, y in rng.uniform(0, 20, (30, 2))
+                               if math.hypot(x - 10, y - 10) > 2 * DUPLICATE_RADIUS][:6]
+    x, y = rng.uniform(-2, 22, 400), rng.uniform(-2, 22, 400)
+    edge = 10.0 + DUPLICATE_RADIUS  # on a horizontal line through the first point: at, inside, outside
+    x = np.concatenate([x, [edge, np.nextafter(edge, 0), np.nextafter(edge, 2 * edge)]])
+    y = np.concatenate([y, np.full(3, points[0][1])])
+    got = near_any_of(points, x, y)
+    want = np.array([near_any(points, a, b) for a, b in zip(x.tolist(), y.tolist())])
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.sum() < len(want) and want[-3:].tolist() == [False, True, False]
+    assert near_any_of([], x, y).tolist() == [False] * len(x)
+    assert near_any_of(points, x[:0], y[:0]).shape == (0,)
