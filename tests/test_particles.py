@@ -490,21 +490,23 @@ def test_gpu_layout_gives_the_same_bits_on_the_cpu(rng, monkeypatch):
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the split tile loops are the CPU's")
 @pytest.mark.parametrize("threads", [1, 2])
-def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, threads):
+@pytest.mark.parametrize("caps", [[2100, 1500, 300, 1100], [3100, 1500, 300]])
+def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, threads, caps):
     """Tile loops split over two threads (forced: ``tile_threads`` splits only pools of SPLIT_PARTICLES
     slots or more, and only with pinned workers) against the serial layout, on one and two threads:
     the fused one-launch step of a pool without copies (a top-up, an empty group, multinomial and
-    systematic resampling, the Seq read-out) and the split, unfused loops of a pool with copies."""
+    systematic resampling, the Seq read-out) and the split, unfused loops of a pool with copies.
+    Four groups (3 + 2 + 1 + 2 tiles) are dealt out group by group, three (4 + 2 + 1) tile by tile;
+    both threads get partial tiles."""
     import tbd_taichi.particles as particles
 
-    caps = [2100, 1500, 300, 1100]  # 3 + 2 + 1 + 2 tiles: both threads get partial tiles
     states = random_states(rng, caps, SHAPE)
     z = rng.standard_normal(SHAPE).astype(np.float32)
     z[0, 0] = 60.0
 
     def run(copies):
         p = ParticlePool(caps, SHAPE, engine="taichi", seed=9, map_capacity=8)
-        p.configure_groups([0, 3], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([0] + list(range(3, len(caps))), "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
         p.configure_groups([1], "map", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
         p.configure_groups([2], "copy" if copies else "uniform", pb=0.3, pd=0.2)
         p.set_proposal_map({1: (np.array([5, 40, 300]), np.array([0.2, 0.5, 0.3]))})
@@ -512,11 +514,11 @@ def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, th
         out = []
         for f in range(5):
             seq = np.empty(p.capacity, np.int32)
-            top_up = [2100, 1500, 300, 1100] if f == 1 else None
-            n_out = [2000, 0, 280, 1000] if f == 2 else None
+            top_up = caps if f == 1 else None
+            n_out = ([caps[0] - 100, 0, 280] + [1000] * (len(caps) - 3)) if f == 2 else None
             got = p.step(f, z, n_out=n_out, systematic=f == 4, top_up=top_up, seq_out=seq)
             out.append((p.state(), got.copy(), p.estimates().x, p.max_log_weights(), p._get("gmax")))
-        return out, p.split
+        return out, (p.split, p.k.tiles_by_group)
 
     try:
         tbd_taichi.init("cpu", threads=threads)
@@ -525,7 +527,7 @@ def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, th
             monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2)
             split, two = run(copies)
             monkeypatch.undo()
-            assert (one, two) == (1, 2)
+            assert (one[0], two) == (1, (2, len(caps) >= 4))
             for (st, *rest_t), (sp, *rest_s) in zip(serial, split):
                 for key in st:
                     np.testing.assert_array_equal(st[key], sp[key], err_msg=key)
