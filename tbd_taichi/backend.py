@@ -156,6 +156,31 @@ def pinned_workers() -> list[int]:
     return list(_pinned)
 
 
+def background_cpu() -> int | None:
+    """The CPU a helper process should use, that of the last pinned worker (the main thread's serial work
+    tends to stay with the first), where :func:`init` pinned the workers; else None (the scheduler
+    places it)."""
+    try:
+        return max(os.sched_getaffinity(_pinned[-1])) if _pinned else None
+    except OSError:  # the worker is gone
+        return None
+
+
+def run_in_background(cpu: int) -> bool:
+    """Move every thread of this process (and those it starts later) onto ``cpu`` at idle priority
+    (Linux ``SCHED_IDLE``): a helper process then runs only in time the tracker leaves that CPU, and a
+    worker thread that wakes for a parallel loop takes the CPU at once.  False where it cannot."""
+    if not hasattr(os, "sched_setscheduler") or not hasattr(os, "SCHED_IDLE"):
+        return False
+    try:
+        for tid in sorted(_thread_ids()):
+            os.sched_setaffinity(tid, {cpu})
+            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+    except OSError:
+        return False
+    return True
+
+
 def ensure_init(arch: str | None = None) -> BackendConfig:
     """Initialise on ``arch`` if given; otherwise keep the running runtime, or start the CPU one."""
     if arch is not None:

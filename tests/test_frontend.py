@@ -1,4 +1,5 @@
 """The tracker's front end (normalisation + saliency), in this process and in a second one."""
+import os
 from multiprocessing import shared_memory
 
 import numpy as np
@@ -94,3 +95,25 @@ def test_frontend_process_is_for_sgds_only(tmp_path, capsys):
     assert cli.main(["track", str(tmp_path / "seq.npy"), "--method", "pf", "--frontend-process", "--out",
                      str(tmp_path / "t.csv")]) == 2
     assert "--frontend-process applies to --method sgds only" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
+def test_front_end_process_runs_at_idle_priority_on_the_last_workers_cpu():
+    """With pinned CPU workers the child runs on the last worker's CPU at SCHED_IDLE (every thread), so it
+    never delays a worker; without them it is left to the scheduler."""
+    from tbd_taichi import backend
+
+    front = FrontEndProcess(SHAPE, **OPTIONS)
+    try:
+        front.push(np.zeros(SHAPE, np.float32))  # answered: the child has set itself up
+        threads = [int(t) for t in os.listdir(f"/proc/{front._process.pid}/task")]
+        policies = {os.sched_getscheduler(t) for t in threads}
+        cpus = {frozenset(os.sched_getaffinity(t)) for t in threads}
+        if backend.pinned_workers():
+            last = max(os.sched_getaffinity(backend.pinned_workers()[-1]))
+            assert policies == {os.SCHED_IDLE} and cpus == {frozenset({last})}
+            assert last == backend.background_cpu()
+        else:
+            assert os.SCHED_IDLE not in policies and backend.background_cpu() is None
+    finally:
+        front.close()
