@@ -154,22 +154,38 @@ class ParticleKernels(PopulationKernels):
         the other core's cache waits for them (the kernel profiler, 1.4 preset at 320×256: pass 1 of the
         searching step 1.67–1.69 ms by group, 1.81–1.85 ms with the tiles dealt out one by one).  Each
         tile is still reduced serially, so the results do not depend on the split."""
-        if ti.static(self.split > 1):
+        if ti.static(self.split > 1 and self.tiles_by_group):
+            self.for_groups(self.group_tiles, {'body': body, 'args': args})
+        elif ti.static(self.split > 1):
             for v in range(self.split * THREAD_SPAN):
                 if v % THREAD_SPAN == 0:
                     k = v // THREAD_SPAN
-                    if ti.static(self.tiles_by_group):
-                        for j in range((self.n.shape[0] - k + self.split - 1) // self.split):
-                            g = k + j * self.split
-                            for t in range(self.gt0[g], self.gt1[g]):
-                                body(t, args)
-                    else:
-                        for j in range((self.tile_start.shape[0] - k + self.split - 1) // self.split):
-                            body(k + j * self.split, args)
+                    for j in range((self.tile_start.shape[0] - k + self.split - 1) // self.split):
+                        body(k + j * self.split, args)
         else:
             ti.loop_config(serialize=self.serial)
             for t in range(self.tile_start.shape[0]):
                 body(t, args)
+
+    @ti.func
+    def group_tiles(self, g: ti.i32, loop: ti.template()):
+        """``for_tiles``' body for the tiles of group g, in order."""
+        for t in range(self.gt0[g], self.gt1[g]):
+            loop['body'](t, loop['args'])
+
+    @ti.func
+    def for_groups(self, body: ti.template(), args: ti.template()):
+        """body(g, args) for every group g, split like ``for_tiles`` (thread k: groups k, k + split, …)."""
+        if ti.static(self.split > 1):
+            for v in range(self.split * THREAD_SPAN):
+                if v % THREAD_SPAN == 0:
+                    k = v // THREAD_SPAN
+                    for j in range((self.n.shape[0] - k + self.split - 1) // self.split):
+                        body(k + j * self.split, args)
+        else:
+            ti.loop_config(serialize=self.serial)
+            for g in range(self.n.shape[0]):
+                body(g, args)
 
     @ti.func
     def no_group_values(self, g: ti.i32, args: ti.template()):
@@ -698,8 +714,11 @@ class ParticleKernels(PopulationKernels):
         Serial steps between them combine the tiles of each group.  The same operations on the same
         slots as the unfused step, so the same bits."""
         self.store_counts(counts)
-        self.for_tiles(self.predicted_tile,
-                       {'values': (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma), 'z': z})
+        values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
+        if ti.static(self.tiles_by_group):
+            self.for_groups(self.predicted_group, {'values': values, 'z': z})
+        else:
+            self.for_tiles(self.predicted_tile, {'values': values, 'z': z})
         self.group_maxima()
         ti.loop_config(serialize=True)
         for g in range(best.shape[0]):
@@ -715,32 +734,56 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def predicted_tile(self, t: ti.i32, loop: ti.template()):
-        """``fused_step``'s pass 1 over tile t: Eqs. 7–8 for the slots live before the top-up (the added
-        ones become initial particles), Eq. 34's draws, Eqs. 9–10, Eq. 15 and the tile maxima."""
-        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
+        """``fused_step``'s pass 1 over tile t (tiles dealt out one by one: no copying group), see
+        ``predicted_slots`` and ``weighed_tile``."""
         g = self.tile_group[t]
-        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
         if self.n[g] > 0:
-            # the keys and constants of each stage's loop, per tile (a few hashes; made once before the
-            # parallel loop instead, the pass took as long)
-            rates = self.existence_rates(g, ())
-            first_added = self.first_added_slot(g, ())
-            exist = (key_prefix(seed, frame, S_EXIST), b)
-            birth = ([key_prefix(seed, frame, st) for st in ti.static(BIRTH_STREAMS)], b, width)
-            c11, c21, c22, sq2 = ncv_noise_factors(q1, q2)
-            noise = ([key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)], (c11, c21, c22, sq2, i_floor),
-                     b, width, height)
-            inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
-            weight = (b, inv2s2, norm, inv_var, step)
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                if i < first_added:
-                    self.existence_step(i, g, rates, exist)
-                else:
-                    self.born[i] = 2
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                self.newborn_draw(i, g, 0, birth)
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                self.ncv_step(i, g, 0, noise)
+            self.predicted_slots(g, self.tile_start[t], self.tile_end(t), loop)
+        self.weighed_tile(t, loop)
+
+    @ti.func
+    def predicted_group(self, g: ti.i32, loop: ti.template()):
+        """``fused_step``'s pass 1 over group g (whole groups per thread), see ``predicted_slots`` and
+        ``weighed_tile``.  Each stage covers the whole group before the next, as in the unfused step, so
+        copies (kind 2) find the group's particles as they would there."""
+        if self.n[g] > 0:
+            self.predicted_slots(g, self.off[g], self.off[g] + self.n[g], loop)
+        for t in range(self.gt0[g], self.gt1[g]):
+            self.weighed_tile(t, loop)
+
+    @ti.func
+    def predicted_slots(self, g: ti.i32, i0: ti.i32, i1: ti.i32, loop: ti.template()):
+        """Steps 1–2 for slots [i0, i1) of group g, a loop per stage: Eqs. 7–8 for the slots live before
+        the top-up (the added ones become initial particles), Eq. 34's draws, Eqs. 9–10."""
+        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
+        # the keys and constants of each stage's loop, per call (a few hashes; made once before the
+        # parallel loop instead, the pass took as long)
+        rates = self.existence_rates(g, ())
+        first_added = self.first_added_slot(g, ())
+        exist = (key_prefix(seed, frame, S_EXIST), b)
+        birth = ([key_prefix(seed, frame, st) for st in ti.static(BIRTH_STREAMS)], b, width)
+        c11, c21, c22, sq2 = ncv_noise_factors(q1, q2)
+        noise = ([key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)], (c11, c21, c22, sq2, i_floor),
+                 b, width, height)
+        copies = self.copies_newborns(g, ())
+        for i in range(i0, i1):
+            if i < first_added:
+                self.existence_step(i, g, rates, exist)
+            else:
+                self.born[i] = 2
+        for i in range(i0, i1):
+            self.newborn_draw(i, g, 0, birth)
+        for i in range(i0, i1):
+            self.ncv_step(i, g, copies, noise)
+
+    @ti.func
+    def weighed_tile(self, t: ti.i32, loop: ti.template()):
+        """Steps 3–4a for tile t: Eq. 15's log-weights and the tile maxima."""
+        seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
+        inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
+        weight = (b, inv2s2, norm, inv_var, step)
+        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+        if self.n[self.tile_group[t]] > 0:
             for i in range(self.tile_start[t], self.tile_end(t)):
                 lw = self.log_weight(i, {'values': weight, 'zp': loop['z']})
                 self.logw[i] = lw

@@ -485,10 +485,16 @@ class ParticlePool:
         self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
                     self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic),
                     seq if seq is not None and len(seq) else self._no_seq, seq is not None,
-                    self.split > 1 and not (self.kinds == BIRTH_KINDS["copy"]).any())
+                    self._fused_step())
         self.buf = 1 - self.buf
         self.counts = n_out
         return seq
+
+    def _fused_step(self) -> bool:
+        """Whether ``step`` runs as the kernels' three-pass ``fused_step``: split tile loops, and copying
+        groups (kind 2) only where whole groups go to each thread (``tiles_by_group``), since a copy
+        reads other slots of its group."""
+        return self.split > 1 and (self.k.tiles_by_group or not (self.kinds == BIRTH_KINDS["copy"]).any())
 
     def normalised_weights(self) -> np.ndarray:
         """Eq. 16 per live particle, in :meth:`state` order (for tests and diagnostics)."""
