@@ -215,8 +215,11 @@ def populations(group: np.ndarray, seq: np.ndarray, table_limit: int = 1 << 22):
 
 def slab_populations(slab_counts, seq: np.ndarray, table_limit: int = 1 << 22):
     """:func:`populations` of particles listed block by block, ``slab_counts[g]`` of block g (the pool's state
-    order), without a per-particle block array.  One bincount over the (block, Seq) table when it has at
-    most ``table_limit`` entries (each block's keys offset by a slice), else a sort."""
+    order), without a per-particle block array: one bincount over a (block, Seq) table (each block's keys
+    offset by a slice), or a sort where that table would exceed ``table_limit`` entries.  Where the table
+    would be sparse (more entries than twice the particles), the Seq values present are first numbered
+    densely, in order: long-lived PPs spread the Seq range (1024×1024 at the 1.4 preset: 61,000 values,
+    4,300 of them present, 49 blocks, and 9.2 ms a frame, 3.5 ms numbered densely)."""
     seq = np.asarray(seq)
     if len(seq) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -224,19 +227,24 @@ def slab_populations(slab_counts, seq: np.ndarray, table_limit: int = 1 << 22):
     blocks = np.flatnonzero(slab_counts)
     lo, n_groups = int(seq.min()), int(blocks[-1]) + 1
     span = int(seq.max()) - lo + 1
-    if n_groups * span > table_limit:
+    key = (seq - lo).astype(np.int32, copy=False) if span <= table_limit else None
+    width, first = span, 0  # table row width, first key of a row
+    if key is not None and n_groups * span > 2 * len(seq):
+        dense = np.cumsum(np.bincount(key, minlength=span) > 0, dtype=np.int32)  # 1 + dense id of each value
+        key, width, first = np.take(dense, key), int(dense[-1]), 1
+    if key is None or n_groups * width > table_limit:
         group = np.repeat(np.arange(len(slab_counts)), slab_counts)
         keys, code = np.unique(group * span + (seq.astype(np.int64) - lo), return_inverse=True)
         return keys // span, code.reshape(-1), np.bincount(code.reshape(-1), minlength=len(keys))
-    key = (seq - lo).astype(np.int32, copy=False)  # block-major key (int32: ≤ table_limit)
     ends = np.cumsum(slab_counts)
-    for g in blocks[1:]:
-        key[ends[g] - slab_counts[g]:ends[g]] += np.int32(g * span)
-    table = np.bincount(key, minlength=n_groups * span)
+    for g in blocks:
+        if g * width != first:
+            key[ends[g] - slab_counts[g]:ends[g]] += np.int32(g * width - first)
+    table = np.bincount(key, minlength=n_groups * width)
     keys = np.flatnonzero(table)
     index = np.empty(len(table), np.int32)  # PP index of each present key (every particle's key is present)
     index[keys] = np.arange(len(keys), dtype=np.int32)
-    return keys // span, np.take(index, key), table[keys]
+    return keys // width, np.take(index, key), table[keys]
 
 
 def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:

@@ -179,14 +179,20 @@ def test_populations_number_block_seq_pairs_in_order(seq_span):
     assert all(len(a) == 0 for a in empty)
 
 
-@pytest.mark.parametrize("seq_span", [7, 1 << 24])
-def test_slab_populations_equal_populations_with_empty_blocks(seq_span):
-    """Counts per block (empty blocks first, between and last) give what the per-particle block array gives."""
+@pytest.mark.parametrize("seq_span", [7, 5000, 1 << 24])  # a dense table, one over dense Seq ids, the sort
+def test_slab_populations_with_empty_blocks_match_unique_pairs(seq_span):
+    """Counts per block (empty blocks first, between and last) against np.unique over (block, Seq) rows,
+    and against the per-particle block array; the caller's Seq is left as it was."""
     rng = np.random.default_rng(seq_span + 1)
     slabs = np.array([0, 400, 0, 0, 1201, 37, 0])
     group = np.repeat(np.arange(len(slabs)), slabs)
-    seq = rng.integers(0, seq_span, len(group)).astype(np.int32)
+    seq = (rng.integers(0, seq_span, len(group)) + 1000).astype(np.int32)
     seq_before = seq.copy()
-    for got, want in zip(slab_populations(slabs, seq), populations(group, seq)):
-        np.testing.assert_array_equal(got, want)
-    np.testing.assert_array_equal(seq, seq_before)  # the caller's Seq is not changed
+    pairs, inverse_ref, counts_ref = np.unique(np.stack([group, seq], 1), axis=0, return_inverse=True,
+                                               return_counts=True)
+    got = slab_populations(slabs, seq)
+    for a, b in zip(got, (pairs[:, 0], inverse_ref.reshape(-1), counts_ref)):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(got, populations(group, seq)):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(seq, seq_before)
