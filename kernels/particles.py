@@ -15,13 +15,13 @@ import math
 
 import taichi as ti
 
+from .loops import THREAD_SPAN
 from .populations import PopulationKernels
 from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 TILE = 1024
 PAD = 4  # zero border of the frame the weights read: a 5×5 window (Eq. 15) that touches the image stays inside it
 WALKS = 4  # interleaved merge walks per tile in draw_parents
-THREAD_SPAN = 512  # Taichi's CPU range-for gives each thread a run of at least this many iterations
 NEG_INF = -3.0e38
 TWO_PI = 2.0 * math.pi
 

@@ -13,7 +13,9 @@ Loops run row by row: the outer loop over rows is parallel, or serial when the
 template argument ``serial`` is True (small images, where a parallel launch costs
 more than the work).  (2r+1)² operators are separable, a row pass then a column
 pass, with r ≤ 8.  The max filters are streamed: the image is split into
-``n_chunks`` runs of rows (the parallel loop), and each run walks down its rows once,
+``n_chunks`` runs of rows (the parallel loop; on the CPU each run starts a thread's share of the
+loop, ``loops.thread_span``, since Taichi's CPU range-for hands a thread at least 512 iterations
+and a loop over 16 runs would run on one thread), and each run walks down its rows once,
 keeping the row-pass results of the last 2r+1 rows in a small per-chunk ring, so
 intermediate images are never written to memory (with the per-lane f64 row sums,
 9.8 → 7.4 ms per frame for the whole stage at 1024×1024 on the 2-core CPU).
@@ -22,6 +24,8 @@ Border rule (both engines): out-of-image pixels are ignored by the max filters a
 contribute 0 to the sums (the energy sum of Eq. 21 and the 5×5 correlation of Eq. 27).
 """
 import taichi as ti
+
+from .loops import thread_span
 
 LANES = 8
 NEG_INF = -3.0e38
@@ -212,22 +216,25 @@ def energy_and_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.te
     With ``keep_i_se``, I_se is also written to i_se[0] (tests, figures).
     """
     h = z.shape[1]
+    span = ti.static(thread_span(serial))
     ti.loop_config(serialize=serial)
-    for c in range(n_chunks):
-        y0, y1 = chunk_rows(c, n_chunks, h)
-        for y in range(y0 - 2 * r, y1 + 2 * r):
-            if 0 <= y < h:
-                energy_row_pass(z, zs, y, hs, hm, c, r)
-            yb = y - r
-            if 0 <= yb < h and y0 - r <= yb < y1 + r:
-                for xb in range(z.shape[2]):
-                    line[c, 0, xb] = energy_column(z, zs, hs, hm, c, yb, xb, r)
-                    if ti.static(keep_i_se):
-                        if y0 <= yb < y1:
-                            i_se[0, yb, xb] = line[c, 0, xb]
-                row_max(line, c, 0, ring, c, yb % (2 * r + 1), valid, r)
-            if y0 <= y - 2 * r < y1:
-                column_max(ring, c, y - 2 * r, h, se_max, ds, valid, r)
+    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
+        if u % span == 0:
+            c = u // span
+            y0, y1 = chunk_rows(c, n_chunks, h)
+            for y in range(y0 - 2 * r, y1 + 2 * r):
+                if 0 <= y < h:
+                    energy_row_pass(z, zs, y, hs, hm, c, r)
+                yb = y - r
+                if 0 <= yb < h and y0 - r <= yb < y1 + r:
+                    for xb in range(z.shape[2]):
+                        line[c, 0, xb] = energy_column(z, zs, hs, hm, c, yb, xb, r)
+                        if ti.static(keep_i_se):
+                            if y0 <= yb < y1:
+                                i_se[0, yb, xb] = line[c, 0, xb]
+                    row_max(line, c, 0, ring, c, yb % (2 * r + 1), valid, r)
+                if y0 <= y - 2 * r < y1:
+                    column_max(ring, c, y - 2 * r, h, se_max, ds, valid, r)
 
 
 @ti.func
@@ -238,19 +245,22 @@ def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale:
     (2r+1)² max filter into acc_max[ds], streamed like :func:`energy_and_max` (r halo rows).
     With one slot and scale 1 it is the max filter of that slot."""
     h = src.shape[1]
+    span = ti.static(thread_span(serial))
     ti.loop_config(serialize=serial)
-    for c in range(n_chunks):
-        y0, y1 = chunk_rows(c, n_chunks, h)
-        for y in range(y0 - r, y1 + r):
-            if 0 <= y < h:
-                for xb in range(src.shape[2]):
-                    v = sum_of_slots(src, a, b, c3, y, xb) * scale
-                    line[c, 0, xb] = v
-                    if y0 <= y < y1:
-                        acc[ds, y, xb] = v
-                row_max(line, c, 0, ring, c, y % (2 * r + 1), valid, r)
-            if y0 <= y - r < y1:
-                column_max(ring, c, y - r, h, acc_max, ds, valid, r)
+    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
+        if u % span == 0:
+            c = u // span
+            y0, y1 = chunk_rows(c, n_chunks, h)
+            for y in range(y0 - r, y1 + r):
+                if 0 <= y < h:
+                    for xb in range(src.shape[2]):
+                        v = sum_of_slots(src, a, b, c3, y, xb) * scale
+                        line[c, 0, xb] = v
+                        if y0 <= y < y1:
+                            acc[ds, y, xb] = v
+                    row_max(line, c, 0, ring, c, y % (2 * r + 1), valid, r)
+                if y0 <= y - r < y1:
+                    column_max(ring, c, y - r, h, acc_max, ds, valid, r)
 
 
 @ti.kernel
@@ -392,18 +402,21 @@ def multi_frame_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, m
     target's evidence adds up along its track over about 1/(1 − γ) frames, while noise peaks
     do not line up.  The max filter is streamed like :func:`accumulate_max`; padding lanes 0."""
     h = memory.shape[1]
+    span = ti.static(thread_span(serial))
     ti.loop_config(serialize=serial)
-    for c in range(n_chunks):
-        y0, y1 = chunk_rows(c, n_chunks, h)
-        for y in range(y0 - r, y1 + r):
-            if 0 <= y < h:
-                row_max(memory, src, y, ring, c, y % (2 * r + 1), valid, r)
-            yc = y - r
-            if y0 <= yc < y1:
-                column_max(ring, c, yc, h, memory, dst, valid, r)
-                for xb in range(memory.shape[2]):
-                    lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
-                    memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
+    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
+        if u % span == 0:
+            c = u // span
+            y0, y1 = chunk_rows(c, n_chunks, h)
+            for y in range(y0 - r, y1 + r):
+                if 0 <= y < h:
+                    row_max(memory, src, y, ring, c, y % (2 * r + 1), valid, r)
+                yc = y - r
+                if y0 <= yc < y1:
+                    column_max(ring, c, yc, h, memory, dst, valid, r)
+                    for xb in range(memory.shape[2]):
+                        lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
+                        memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
 
 
 @ti.kernel
