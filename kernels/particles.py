@@ -156,16 +156,8 @@ class ParticleKernels(PopulationKernels):
         tile is still reduced serially, so the results do not depend on the split."""
         if ti.static(self.split > 1 and self.tiles_by_group):
             self.for_groups(self.group_tiles, {'body': body, 'args': args})
-        elif ti.static(self.split > 1):
-            for v in range(self.split * THREAD_SPAN):
-                if v % THREAD_SPAN == 0:
-                    k = v // THREAD_SPAN
-                    for j in range((self.tile_start.shape[0] - k + self.split - 1) // self.split):
-                        body(k + j * self.split, args)
         else:
-            ti.loop_config(serialize=self.serial)
-            for t in range(self.tile_start.shape[0]):
-                body(t, args)
+            self.for_split(self.tile_start.shape[0], body, args)
 
     @ti.func
     def group_tiles(self, g: ti.i32, loop: ti.template()):
@@ -176,16 +168,22 @@ class ParticleKernels(PopulationKernels):
     @ti.func
     def for_groups(self, body: ti.template(), args: ti.template()):
         """body(g, args) for every group g, split like ``for_tiles`` (thread k: groups k, k + split, …)."""
+        self.for_split(self.n.shape[0], body, args)
+
+    @ti.func
+    def for_split(self, count: ti.template(), body: ti.template(), args: ti.template()):
+        """body(u, args) for u = 0 … count − 1: serial, or with ``split`` > 1 thread k takes u = k, k + split, …
+        (the first iteration of each thread's THREAD_SPAN-long run does its share, see ``for_tiles``)."""
         if ti.static(self.split > 1):
             for v in range(self.split * THREAD_SPAN):
                 if v % THREAD_SPAN == 0:
                     k = v // THREAD_SPAN
-                    for j in range((self.n.shape[0] - k + self.split - 1) // self.split):
+                    for j in range((count - k + self.split - 1) // self.split):
                         body(k + j * self.split, args)
         else:
             ti.loop_config(serialize=self.serial)
-            for g in range(self.n.shape[0]):
-                body(g, args)
+            for u in range(count):
+                body(u, args)
 
     @ti.func
     def no_group_values(self, g: ti.i32, args: ti.template()):
@@ -781,17 +779,8 @@ class ParticleKernels(PopulationKernels):
         """Steps 3–4a for tile t: Eq. 15's log-weights and the tile maxima."""
         seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
         inv2s2, norm, inv_var, step = psf_constants(psf_sigma, noise_sigma)
-        weight = (b, inv2s2, norm, inv_var, step)
-        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
-        if self.n[self.tile_group[t]] > 0:
-            for i in range(self.tile_start[t], self.tile_end(t)):
-                lw = self.log_weight(i, {'values': weight, 'zp': loop['z']})
-                self.logw[i] = lw
-                m = ti.max(m, lw)
-                if self.e[b, i] == 1:
-                    me = ti.max(me, lw)
-        self.tile_max[t] = m
-        self.tile_max_e[t] = me
+        self.tile_maximum(t, {'b': b, 'weigh': True,
+                              'args': {'values': (b, inv2s2, norm, inv_var, step), 'zp': loop['z']}})
 
     @ti.func
     def weighted_tile(self, t: ti.i32, loop: ti.template()):
