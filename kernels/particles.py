@@ -186,6 +186,19 @@ class ParticleKernels(PopulationKernels):
                 body(u, args)
 
     @ti.func
+    def for_groups_with(self, other: ti.template(), body: ti.template(), args: ti.template(),
+                        other_body: ti.template(), other_args: ti.template()):
+        """body(g, args) for this pool's groups and other_body(h, other_args) for the groups of ``other`` (a
+        second pool), in one loop split like ``for_groups``: thread k takes groups k, k + split, … of each."""
+        for v in range(self.split * THREAD_SPAN):
+            if v % THREAD_SPAN == 0:
+                k = v // THREAD_SPAN
+                for j in range((self.n.shape[0] - k + self.split - 1) // self.split):
+                    body(k + j * self.split, args)
+                for j in range((other.n.shape[0] - k + self.split - 1) // self.split):
+                    other_body(k + j * self.split, other_args)
+
+    @ti.func
     def no_group_values(self, g: ti.i32, args: ti.template()):
         """A ``for_slots`` prologue for bodies that need no per-group values."""
         return 0
@@ -730,6 +743,61 @@ class ParticleKernels(PopulationKernels):
                                              'key': key_prefix(seed, frame, S_SYSTEMATIC)})
         self.commit_counts()
 
+    @ti.kernel
+    def step_pair(self, other: ti.template(), seed: ti.u32, frame: ti.i32, b: ti.i32,
+                  counts: ti.types.ndarray(dtype=ti.i32, ndim=1), q1: ti.f32, q2: ti.f32, i_floor: ti.f32,
+                  width: ti.i32, height: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32,
+                  best: ti.types.ndarray(dtype=ti.f32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                  n_out: ti.types.ndarray(dtype=ti.i32, ndim=1), systematic: ti.template(),
+                  seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(), other_seed: ti.u32,
+                  other_b: ti.i32, other_counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  other_best: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                  other_n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                  moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """``step`` (fused, whole groups per thread) of this pool and of ``other``, a second pool on the
+        same frame z with the same motion and PSF constants (the tracking PFs beside the searching PFs),
+        in the same three passes, so the threads share both pools' work and the serial pool ``other`` no
+        longer leaves a core idle; then ``other``'s ``estimates`` into ``moments``.  Each group is
+        stepped as ``fused_step`` steps it, so both pools get the bits of their own ``step``."""
+        self.store_counts(counts)
+        other.store_counts(other_counts)
+        values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
+        other_values = (other_seed, frame, other_b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
+        self.for_groups_with(other, self.predicted_group, {'values': values, 'z': z},
+                             other.predicted_group, {'values': other_values, 'z': z})
+        for pool, out in ti.static(((self, best), (other, other_best))):
+            pool.group_maxima()
+            ti.loop_config(serialize=True)
+            for g in range(out.shape[0]):
+                out[g] = pool.gmax_e[g]
+        self.set_out_counts(n_out)
+        other.set_out_counts(other_n_out)
+        key, other_key = key_prefix(seed, frame, S_RESAMPLE), key_prefix(other_seed, frame, S_RESAMPLE)
+        self.for_groups_with(other, self.group_tiles, {'body': self.weighted_tile,
+                                                       'args': {'systematic': systematic, 'key': key}},
+                             other.group_tiles, {'body': other.weighted_tile,
+                                                 'args': {'systematic': systematic, 'key': other_key}})
+        for pool, pool_seed in ti.static(((self, seed), (other, other_seed))):
+            pool.group_prefix()
+            if ti.static(not systematic):
+                pool.group_spacings(pool_seed, frame)
+        key, other_key = key_prefix(seed, frame, S_SYSTEMATIC), key_prefix(other_seed, frame, S_SYSTEMATIC)
+        self.for_groups_with(other, self.group_tiles, {'body': self.resampled_tile,
+                                                       'args': {'systematic': systematic, 'b': b, 'key': key}},
+                             other.group_tiles, {'body': other.resampled_moments_tile,
+                                                 'args': {'systematic': systematic, 'b': other_b, 'key': other_key}})
+        self.commit_counts()
+        other.commit_counts()
+        other.group_moments(moments)
+        if ti.static(read_seq):
+            self.seq_in_state_order(1 - b, seq)
+
+    @ti.func
+    def resampled_moments_tile(self, t: ti.i32, loop: ti.template()):
+        """``resampled_tile``, then the tile's ``estimates`` sums over its new particles."""
+        self.resampled_tile(t, loop)
+        self.moment_sums(t, 1 - loop['b'], self.out_tile_end(t))
+
     @ti.func
     def predicted_tile(self, t: ti.i32, loop: ti.template()):
         """``fused_step``'s pass 1 over tile t (tiles dealt out one by one: no copying group), see
@@ -883,8 +951,13 @@ class ParticleKernels(PopulationKernels):
     @ti.func
     def tile_moment_sums(self, t: ti.i32, b: ti.template()):
         """``tile_sums`` for tile t."""
+        self.moment_sums(t, b, self.tile_end(t))
+
+    @ti.func
+    def moment_sums(self, t: ti.i32, b: ti.i32, end: ti.i32):
+        """``tile_sums`` for the slots of tile t before ``end``, in buffer b."""
         acc = ti.Vector([0.0] * N_MOMENTS, dt=ti.f64)
-        for i in range(self.tile_start[t], self.tile_end(t)):
+        for i in range(self.tile_start[t], end):
             e = ti.cast(self.e[b, i], ti.f64)
             x = ti.cast(self.x[b, i], ti.f64)
             y = ti.cast(self.y[b, i], ti.f64)
@@ -899,6 +972,11 @@ class ParticleKernels(PopulationKernels):
     def estimates(self, b: ti.i32, moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
         """Per group, the tile sums added in tile order into ``moments`` (G, N_MOMENTS)."""
         self.tile_sums(b)
+        self.group_moments(moments)
+
+    @ti.func
+    def group_moments(self, moments: ti.template()):
+        """``estimates``' second part: each group's tile sums, added in tile order."""
         ti.loop_config(serialize=self.serial)
         for g in range(self.off.shape[0]):
             for k in ti.static(range(N_MOMENTS)):

@@ -490,6 +490,42 @@ class ParticlePool:
         self.counts = n_out
         return seq
 
+    def step_with(self, other: "ParticlePool", frame: int, z: np.ndarray, top_up=None,
+                  seq_out: np.ndarray | None = None) -> tuple[np.ndarray | None, GroupEstimates]:
+        """:meth:`step` of this pool (with ``top_up`` and ``seq_out``) and of ``other`` (its live counts) on
+        the same frame, then ``other``'s :meth:`estimates`: the same results as those three calls, in one
+        launch where the kernels allow (:meth:`_pairs_with`), so the threads that share this pool's
+        groups share ``other``'s as well.  Returns (Seq as :meth:`step` returns it, ``other``'s estimates)."""
+        from .kernels.particles import N_MOMENTS
+
+        if not self._pairs_with(other):
+            seq = self.step(frame, z, top_up=top_up, seq_out=seq_out)
+            other.step(frame, z)
+            return seq, other.estimates()
+        z = self._into_border(z, self._step_z)
+        counts = self._topped_up(top_up)
+        n_out = self._resampled_counts(None, counts)
+        seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
+        other_n_out = other._resampled_counts(None)
+        moments = np.empty((other.n_groups, N_MOMENTS))
+        h, w = self.frame_shape
+        self.k.step_pair(other.k._target, self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor,
+                         w, h, self.psf_sigma, self.noise_sigma, self._best, z, n_out, False,
+                         seq if seq is not None and len(seq) else self._no_seq, seq is not None,
+                         other.seed, other.buf, other.counts, other._best, other_n_out, moments)
+        for pool, out in ((self, n_out), (other, other_n_out)):
+            pool.buf, pool.counts = 1 - pool.buf, out
+        return seq, other._estimates_from(moments)
+
+    def _pairs_with(self, other: "ParticlePool") -> bool:
+        """Whether :meth:`step_with` can step ``other`` in this pool's launch: both on Taichi's CPU layout,
+        this pool fused with whole groups per thread, the same frame shape and the same motion, PSF,
+        noise and intensity-floor constants."""
+        same = (self.frame_shape, self.q1, self.q2, self.psf_sigma, self.noise_sigma, self.intensity_floor) == \
+            (other.frame_shape, other.q1, other.q2, other.psf_sigma, other.noise_sigma, other.intensity_floor)
+        return (same and self.engine_name == other.engine_name == "taichi" and self._fused_step()
+                and self.k.tiles_by_group and not other.k.flat)
+
     def _fused_step(self) -> bool:
         """Whether ``step`` runs as the kernels' three-pass ``fused_step``: split tile loops, and copying
         groups (kind 2) only where whole groups go to each thread (``tiles_by_group``), since a copy
@@ -507,11 +543,17 @@ class ParticlePool:
 
     def estimates(self) -> GroupEstimates:
         """Eq. 19, existence probability, mean Tp and covariances per group (current buffer)."""
-        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY, M_EYY, M_N, M_TP, M_X,
-                                        M_XX, M_XY, M_Y, M_YY, N_MOMENTS)
+        from .kernels.particles import N_MOMENTS
 
         m = np.empty((self.n_groups, N_MOMENTS))
         self.k.estimates(self.buf, m)
+        return self._estimates_from(m)
+
+    def _estimates_from(self, m: np.ndarray) -> GroupEstimates:
+        """:meth:`estimates` from the kernels' per-group sums ``m`` (G, N_MOMENTS)."""
+        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY, M_EYY, M_N, M_TP, M_X,
+                                        M_XX, M_XY, M_Y, M_YY)
+
         n, ne = m[:, M_N], m[:, M_E]
         with np.errstate(invalid="ignore", divide="ignore"):  # the means, NaN where their count is 0
             every = np.where(n[:, None] > 0, m[:, [M_TP, M_X, M_Y, M_XX, M_YY, M_XY]] / n[:, None], np.nan)

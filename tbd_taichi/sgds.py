@@ -371,12 +371,18 @@ class SGDSPF:
     # ------------------------------------------------------------ one frame
 
     def _process(self, front: FrontFrame) -> list[tuple]:
+        """Frame f: both PF stages in one step (the tracking PFs of the tracks begun by frame f − 1), the
+        tracks' confirmation, then Eq. 37's elimination and the hand-over of frame f's potential targets,
+        whose tracking PFs first step at f + 1 (a handed PP's particles have already weighed frame f)."""
         f, z = front.frame, front.z
         t0 = time.perf_counter()
-        log_msw = self._search_step(f, z, front)
+        seq, est = self._filter_step(f, z, front)
+        log_msw = self._log_msw(front)
         t0 = self._clock("searching", t0)
-        rows = self._track_step(f, z, log_msw)
-        self._clock("tracking", t0)
+        rows = self._confirm_tracks(f, z, est, log_msw)
+        t0 = self._clock("tracking", t0)
+        self._eliminate_and_hand_over(f, seq)
+        self._clock("searching", t0)
         if self.history:
             self.online_rows += rows
         return rows
@@ -410,8 +416,10 @@ class SGDSPF:
         np.copyto(labels, self.pp_index, where=old)
         return labels
 
-    def _search_step(self, f: int, z: np.ndarray, front: FrontFrame) -> float:
-        """Algorithm 1 on frame f; returns ln MSW for Eq. 40 (``msw_reference``)."""
+    def _filter_step(self, f: int, z: np.ndarray, front: FrontFrame):
+        """Algorithm 1's PF step on frame f (proposal maps, Eqs. 34–36, §2.1) and, in the same launch, Algorithm
+        2's for the active tracks.  Returns the searching particles' Seq (state order) and the tracking PFs'
+        estimates (None without active tracks)."""
         p, pool, grid = self.p, self.search, self.grid
         proposal = front.proposal
         self._suppress_tracked(proposal)
@@ -420,13 +428,16 @@ class SGDSPF:
         pool.set_proposal_map(maps, self._labels(support))
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
-        seq = pool.step(f, z, top_up=np.where(has_map, p.N_sump, pool.counts), seq_out=self._seq)
-        if p.msw_reference == "search":
-            log_msw = float(pool.max_log_weights().max())
-        else:
-            log_msw = msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
-        self._eliminate_and_hand_over(f, seq)
-        return log_msw
+        top_up = np.where(has_map, p.N_sump, pool.counts)
+        if not self.active:
+            return pool.step(f, z, top_up=top_up, seq_out=self._seq), None
+        return pool.step_with(self.tracks_pool, f, z, top_up=top_up, seq_out=self._seq)
+
+    def _log_msw(self, front: FrontFrame) -> float:
+        """ln MSW for Eq. 40 (``msw_reference``), after the searching PFs' step."""
+        if self.p.msw_reference == "search":
+            return float(self.search.max_log_weights().max())
+        return msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
 
     def _eliminate_and_hand_over(self, f: int, seq: np.ndarray) -> None:
         """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp; ``seq``: the
@@ -500,12 +511,12 @@ class SGDSPF:
         return {name: np.add.reduceat(np.where(e, members[name], 0).astype(np.float64), starts) / n_e
                 for name in ("x", "y", "vx", "vy", "inten")}
 
-    def _track_step(self, f: int, z: np.ndarray, log_msw: float) -> list[tuple]:
-        p, pool = self.p, self.tracks_pool
+    def _confirm_tracks(self, f: int, z: np.ndarray, est, log_msw: float) -> list[tuple]:
+        """Algorithm 2 after the tracking PFs' step on frame f (estimates ``est``): paths (Eq. 39), confidences
+        (Eqs. 40–43), confirmation and ends; returns the rows of the tracks reported at f."""
+        p = self.p
         if not self.active:
             return []
-        pool.step(f, z)
-        est = pool.estimates()
         log_mtw = est.max_logw.tolist()
         finite = np.isfinite(est.x).tolist()
         states = np.stack([est.x, est.y, est.vx, est.vy, est.intensity], axis=1).tolist()
@@ -521,8 +532,6 @@ class SGDSPF:
                                           self.icef_ratio)
             t.confidence = update_confidence(t.confidence, intensity_cef, scefs[g])
             if finite[g]:  # Eq. 39
-                if t.path[-1][0] == f:  # handed over this frame: the tracking PF's estimate replaces the PP's
-                    t.path.pop()
                 t.path.append((f, *states[g], t.confidence))
             x, y = t.last_xy()
             lost = t.frames_without_e >= LOST_FRAMES or not (-0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5)

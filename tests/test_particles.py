@@ -538,6 +538,78 @@ def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, th
         tbd_taichi.init(TEST_ARCH)
 
 
+@pytest.mark.skipif(TEST_ARCH != "cpu", reason="the paired step is the CPU's split layout")
+def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch):
+    """``step_with``: a split pool (four groups, whole groups per thread: the searching PFs) and a serial
+    pool of copying groups (the tracking PFs: one group of two tiles, an empty group, one emptied on the
+    way) in one launch, against each pool's own ``step`` and ``estimates``, over a top-up, a partial
+    resampling count and the Seq read-out.  It fails if a group of either pool is dropped or stepped twice."""
+    import tbd_taichi.particles as particles
+
+    caps, track_caps = [2100, 1500, 1300, 1100], [500, 1200, 500, 500]
+    states = random_states(rng, caps, SHAPE)
+    track_states = random_states(rng, track_caps, SHAPE)
+    del track_states[2]
+    z = rng.standard_normal(SHAPE).astype(np.float32)
+    z[0, 0] = 60.0
+
+    def run(paired):
+        p = ParticlePool(caps, SHAPE, engine="taichi", seed=9, map_capacity=8)
+        p.configure_groups([0, 2, 3], "uniform", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.configure_groups([1], "map", pb=0.3, pd=0.2, intensity=(2.0, 9.0))
+        p.set_proposal_map({1: (np.array([5, 40, 300]), np.array([0.2, 0.5, 0.3]))})
+        p.set_state(states)
+        t = ParticlePool(track_caps, SHAPE, engine="taichi", seed=17)
+        t.configure_groups(np.arange(4), "copy", pb=0.3, pd=0.1)
+        t.set_state(track_states)
+        assert p._pairs_with(t)
+        out = []
+        for f in range(4):
+            if f == 2:
+                t.set_counts([500, 1200, 0, 0])
+            seq = np.empty(p.capacity, np.int32)
+            top_up = caps if f == 1 else None
+            if paired:
+                got, est = p.step_with(t, f, z, top_up=top_up, seq_out=seq)
+            else:
+                got = p.step(f, z, top_up=top_up, seq_out=seq)
+                t.step(f, z)
+                est = t.estimates()
+            out.append((p.state(), t.state(), got.copy(), est.x, est.cov_e, est.max_logw, p.max_log_weights()))
+        return out
+
+    monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2 if capacity > 3000 else 1)
+    try:
+        tbd_taichi.init("cpu", threads=2)
+        paired, separate = run(True), run(False)  # run(False) steps the same pools through step and estimates
+    finally:
+        tbd_taichi.init(TEST_ARCH)
+    for (sp, tp, *rest_p), (ss, ts, *rest_s) in zip(paired, separate):
+        for a, b in ((sp, ss), (tp, ts)):
+            for key in a:
+                np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+        for a, b in zip(rest_p, rest_s):
+            np.testing.assert_array_equal(a, b)
+    assert len(paired[-1][1]["x"]) == 1700  # the tracking pool's live groups were stepped
+
+
+def test_pools_pair_only_with_the_same_frame_and_constants(monkeypatch):
+    """``_pairs_with``: not across engines, frame shapes or motion constants, nor for a pool that is not
+    split by group (then ``step_with`` runs the three calls it stands for)."""
+    import tbd_taichi.particles as particles
+
+    monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2)
+    a = ParticlePool([1100] * 4, SHAPE)
+    if not a._fused_step():  # a GPU: no split layout
+        assert not a._pairs_with(ParticlePool([500], SHAPE))
+        return
+    assert a._pairs_with(ParticlePool([500], SHAPE))
+    assert not a._pairs_with(ParticlePool([500], SHAPE, engine="numpy"))
+    assert not a._pairs_with(ParticlePool([500], (SHAPE[0] + 1, SHAPE[1])))
+    assert not a._pairs_with(ParticlePool([500], SHAPE, q1=0.002))
+    assert not ParticlePool([1100] * 2, SHAPE)._pairs_with(ParticlePool([500], SHAPE))  # tiles dealt one by one
+
+
 def test_tile_loops_split_only_for_large_pools_with_pinned_workers(monkeypatch):
     """``tile_threads``: 1 (serial) without pinned workers, for small pools and on GPUs; else the workers,
     at most one per tile."""
