@@ -133,19 +133,27 @@ class PopulationKernels:
         copied out, in state order from column cursor[r] on (the host sets each PP's first column):
         rows x, vx, y, vy, I of ``floats`` and E, Tp, Seq of ``ints``, as ``read_slots`` gives them."""
         h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
-        if ti.static(members):
-            self.for_states(self.copy_member, b, ti.static((rank, cursor, floats, ints)))
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
             self.pixel_key[y, x] = -1
             index[y, x] = 0
-        self.for_states(self.claim_pixel, b, ti.static((drop, index)))
+        if ti.static(members):  # one pass: each particle is copied out before its claim may drop it
+            self.for_states(self.copy_and_claim, b, ti.static((drop, index, rank, cursor, floats, ints)))
+        else:
+            self.for_states(self.claim_pixel, b, ti.static((drop, index)))
         if ti.static(not self.serial):  # the winners write their Seq
             self.for_states(self.write_winner, b, ti.static((drop, index)))
         self.compact(b, self.state_keep)
         ti.loop_config(serialize=True)
         for g in range(counts.shape[0]):
             counts[g] = self.n[g]
+
+    @ti.func
+    def copy_and_claim(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """``copy_member`` then ``claim_pixel`` for particle s (slot i)."""
+        drop, index, rank, cursor, floats, ints = ti.static(arrays)
+        self.copy_member(s, i, b, ti.static((rank, cursor, floats, ints)))
+        self.claim_pixel(s, i, b, ti.static((drop, index)))
 
     @ti.func
     def copy_member(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):

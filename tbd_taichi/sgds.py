@@ -32,7 +32,9 @@ LEF (``lef_memory``, ``lef_scale``) and Eq. 40's MSW the best untracked candidat
 :func:`msw_from_candidates`), both not in the paper (``PAPER_SALIENCY`` restores them); a track also ends when its estimate
 leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
 active track is masked and a potential target within 2 px of a track is dropped, so one
-target gives one track; of two tracks closer than 2 px the younger one is removed.
+target gives one track; of two tracks closer than 2 px the younger one is removed; a track handed over at
+frame f starts its path with the PP's Eq. 38 estimate at f and its tracking PF first steps at f + 1 (the PP's
+particles have weighed frame f already; the paper does not say, the implementation notes suggest it).
 """
 from __future__ import annotations
 
