@@ -112,15 +112,38 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
     does not depend on where the particles are, so it holds when the multi-frame LEF concentrates them.
     Like the searching particles (saliency is masked at tracks, Eq. 36's PPs are handed over), it
     leaves out what is tracked already, so a bright tracked object does not hold other tracks down."""
-    rows = [(value, int(pixel)) for value, pixel in best_lef.tolist() if value > -1e37]
-    if not rows:
+    rows = np.asarray(best_lef, np.float64).reshape(-1, 2)
+    rows = rows[rows[:, 0] > -1e37]
+    if not len(rows):
         return -3.0e38
-    centres = [nearest_pixel(x, y) for x, y in tracked]
-    for value, pixel in rows:  # descending: the first free one (usually the first) decides
-        cx, cy = pixel % width, pixel // width
-        if not any(abs(cx - tx) <= TRACK_MASK_HALF and abs(cy - ty) <= TRACK_MASK_HALF for tx, ty in centres):
-            return value + MSW_LEF_OFFSET
-    return rows[-1][0] + MSW_LEF_OFFSET
+    pixel = rows[:, 1].astype(np.int64)
+    free = ~in_track_squares(pixel % width, pixel // width, tracked)
+    first = int(np.argmax(free)) if free.any() else len(rows) - 1  # descending: the first free one decides
+    return float(rows[first, 0]) + MSW_LEF_OFFSET
+
+
+def track_pixels(tracked: list) -> np.ndarray:
+    """The nearest pixels (column, row) of the (x, y) points ``tracked``, (n, 2) int64 (:func:`nearest_pixel`)."""
+    return np.floor(np.asarray(tracked, np.float64).reshape(-1, 2) + 0.5).astype(np.int64)
+
+
+def in_track_squares(cx: np.ndarray, cy: np.ndarray, tracked: list) -> np.ndarray:
+    """Whether each pixel (cx[k], cy[k]) lies in the ±TRACK_MASK_HALF px square around the nearest pixel of
+    any of the ``tracked`` (x, y) points (bool array)."""
+    centres = track_pixels(tracked)
+    near = (np.abs(cx[:, None] - centres[:, 0]) <= TRACK_MASK_HALF) & \
+        (np.abs(cy[:, None] - centres[:, 1]) <= TRACK_MASK_HALF)
+    return near.any(axis=1)
+
+
+def track_square_pixels(tracked: list, shape) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of the in-image pixels of the ±TRACK_MASK_HALF px squares around the nearest pixels
+    of the ``tracked`` (x, y) points, for one fancy-indexed write (squares may overlap)."""
+    centres = track_pixels(tracked)
+    d = np.arange(-TRACK_MASK_HALF, TRACK_MASK_HALF + 1)
+    rows, cols = np.broadcast_arrays(centres[:, 1, None, None] + d[:, None], centres[:, 0, None, None] + d)
+    inside = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
+    return rows[inside], cols[inside]
 
 
 def icef_of_log_ratio(log_r: float, lower: float = ICEF_LOWER) -> float:
@@ -134,9 +157,9 @@ def icef_of_log_ratio(log_r: float, lower: float = ICEF_LOWER) -> float:
 def log_weight_ratio(log_mtw: float, log_msw: float) -> float:
     """ln(MTW/MSW) of Eq. 40, clipped to ±50; −50 without E = 1 track particles, 0 without E = 1
     search particles (where Eq. 40's fallback gives ICEF = 1)."""
-    if not np.isfinite(log_mtw) or log_mtw <= -1e37:
+    if not math.isfinite(log_mtw) or log_mtw <= -1e37:
         return -50.0
-    if not np.isfinite(log_msw) or log_msw <= -1e37:
+    if not math.isfinite(log_msw) or log_msw <= -1e37:
         return 0.0
     return min(max(log_mtw - log_msw, -50.0), 50.0)
 
@@ -315,7 +338,8 @@ class SGDSPF:
         self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
-        self.ended_groups: list[int] = []  # groups of tracks ended this frame, emptied by _release_groups
+        self.ended_groups: list[int] = []  # groups of tracks ended this frame, freed by _release_groups
+        self.emptied_groups: list[int] = []  # freed groups whose tracking PFs _start_tracks empties
         self.active: list[Track] = []
         self.finished: list[Track] = []
         self.next_track_id = 1
@@ -392,10 +416,8 @@ class SGDSPF:
     def _suppress_tracked(self, proposal: np.ndarray) -> None:
         """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track),
         in place: ``proposal`` is the front frame's own copy, used for this frame's search only."""
-        r = TRACK_MASK_HALF
-        for t in self.active:
-            cx, cy = nearest_pixel(*t.last_xy())
-            proposal[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
+        if self.active:
+            proposal[track_square_pixels([t.last_xy() for t in self.active], proposal.shape)] = 0
 
     def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
         """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
@@ -477,19 +499,21 @@ class SGDSPF:
     def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,
                       tracked: list) -> None:
         """A tracking PF for each handed-over PP: ``members`` holds their particles' states, PP after
-        PP (``sizes`` each), resized to N_tpf particles (Algorithm 2), all loaded in one launch.
-        ``tracked``: the active tracks' last positions, to which the new tracks are added."""
+        PP (``sizes`` each), resized to N_tpf particles (Algorithm 2), all loaded in one launch, which also
+        empties the groups of the tracks ended this frame (:meth:`_release_groups`).  ``tracked``: the active
+        tracks' last positions, to which the new tracks are added."""
         n_tpf = self.p.N_tpf
-        picks, groups = [], []
         starts = np.cumsum(sizes) - sizes
         mean = self._pp_means(members, starts) if len(sizes) else {}
-        for k, (start, size) in enumerate(zip(starts, sizes)):
+        near_tracked = near_any_of(tracked, mean["x"], mean["y"]).tolist() if len(sizes) else []
+        started, groups = [], []  # the PPs that start a track, and their groups
+        for k in range(len(sizes)):
             if not self.free_groups:
                 break
             x, y = float(mean["x"][k]), float(mean["y"][k])
-            if near_any(tracked, x, y):
+            if near_tracked[k] or near_any(tracked[len(tracked) - len(started):], x, y):
                 continue
-            picks.append(start + resize_population(size, n_tpf, rng.random(max(n_tpf, size))))
+            started.append(k)
             groups.append(self.free_groups.pop())
             track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
                           log_ratios=deque(maxlen=self.p.icef_window),
@@ -498,11 +522,22 @@ class SGDSPF:
             track.path.append((f, x, y, float(mean["vx"][k]), float(mean["vy"][k]), float(mean["inten"][k]), 1.0))
             self.active.append(track)
             tracked.append((x, y))
-        if groups:
-            order = np.argsort(groups)
-            index = np.concatenate([picks[k] for k in order])
-            self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
-                                         {name: members[name][index] for name in STATE}, np.asarray(groups))
+        emptied, self.emptied_groups = self.emptied_groups, []
+        if not groups:
+            if emptied:
+                counts = self.tracks_pool.counts.copy()
+                counts[emptied] = 0
+                self.tracks_pool.set_counts(counts)
+            return
+        # one draw for all PPs, the same uniforms as one draw of max(N_tpf, size) per PP in turn
+        draws = [max(n_tpf, sizes[k]) for k in started]
+        uniforms = np.split(rng.random(sum(draws)), np.cumsum(draws)[:-1])
+        picks = [starts[k] + resize_population(sizes[k], n_tpf, u) for k, u in zip(started, uniforms)]
+        order = np.argsort(groups)
+        index = np.concatenate([picks[k] for k in order])
+        # the emptied groups that no new track took are touched with no particles: their count becomes 0
+        self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
+                                     {name: members[name][index] for name in STATE}, np.union1d(groups, emptied))
 
     @staticmethod
     def _pp_means(members: dict, starts: np.ndarray) -> dict:
@@ -588,13 +623,10 @@ class SGDSPF:
             self.finished.append(t)
 
     def _release_groups(self) -> None:
-        """Empty the tracking PFs of the tracks ended this frame (one launch) and free their groups."""
-        if not self.ended_groups:
-            return
-        counts = self.tracks_pool.counts.copy()
-        counts[self.ended_groups] = 0
-        self.tracks_pool.set_counts(counts)
+        """Free the groups of the tracks ended this frame.  Their tracking PFs are emptied by the launch that
+        loads this frame's new tracks (:meth:`_start_tracks`), one launch fewer."""
         self.free_groups += self.ended_groups
+        self.emptied_groups += self.ended_groups
         self.ended_groups = []
 
 
