@@ -112,38 +112,15 @@ def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> floa
     does not depend on where the particles are, so it holds when the multi-frame LEF concentrates them.
     Like the searching particles (saliency is masked at tracks, Eq. 36's PPs are handed over), it
     leaves out what is tracked already, so a bright tracked object does not hold other tracks down."""
-    rows = np.asarray(best_lef, np.float64).reshape(-1, 2)
-    rows = rows[rows[:, 0] > -1e37]
-    if not len(rows):
+    rows = [(value, int(pixel)) for value, pixel in best_lef.tolist() if value > -1e37]
+    if not rows:
         return -3.0e38
-    pixel = rows[:, 1].astype(np.int64)
-    free = ~in_track_squares(pixel % width, pixel // width, tracked)
-    first = int(np.argmax(free)) if free.any() else len(rows) - 1  # descending: the first free one decides
-    return float(rows[first, 0]) + MSW_LEF_OFFSET
-
-
-def track_pixels(tracked: list) -> np.ndarray:
-    """The nearest pixels (column, row) of the (x, y) points ``tracked``, (n, 2) int64 (:func:`nearest_pixel`)."""
-    return np.floor(np.asarray(tracked, np.float64).reshape(-1, 2) + 0.5).astype(np.int64)
-
-
-def in_track_squares(cx: np.ndarray, cy: np.ndarray, tracked: list) -> np.ndarray:
-    """Whether each pixel (cx[k], cy[k]) lies in the ±TRACK_MASK_HALF px square around the nearest pixel of
-    any of the ``tracked`` (x, y) points (bool array)."""
-    centres = track_pixels(tracked)
-    near = (np.abs(cx[:, None] - centres[:, 0]) <= TRACK_MASK_HALF) & \
-        (np.abs(cy[:, None] - centres[:, 1]) <= TRACK_MASK_HALF)
-    return near.any(axis=1)
-
-
-def track_square_pixels(tracked: list, shape) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, columns) of the in-image pixels of the ±TRACK_MASK_HALF px squares around the nearest pixels
-    of the ``tracked`` (x, y) points, for one fancy-indexed write (squares may overlap)."""
-    centres = track_pixels(tracked)
-    d = np.arange(-TRACK_MASK_HALF, TRACK_MASK_HALF + 1)
-    rows, cols = np.broadcast_arrays(centres[:, 1, None, None] + d[:, None], centres[:, 0, None, None] + d)
-    inside = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
-    return rows[inside], cols[inside]
+    centres = [nearest_pixel(x, y) for x, y in tracked]
+    for value, pixel in rows:  # descending: the first free one (usually the first) decides
+        cx, cy = pixel % width, pixel // width
+        if not any(abs(cx - tx) <= TRACK_MASK_HALF and abs(cy - ty) <= TRACK_MASK_HALF for tx, ty in centres):
+            return value + MSW_LEF_OFFSET
+    return rows[-1][0] + MSW_LEF_OFFSET
 
 
 def icef_of_log_ratio(log_r: float, lower: float = ICEF_LOWER) -> float:
@@ -416,8 +393,10 @@ class SGDSPF:
     def _suppress_tracked(self, proposal: np.ndarray) -> None:
         """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track),
         in place: ``proposal`` is the front frame's own copy, used for this frame's search only."""
-        if self.active:
-            proposal[track_square_pixels([t.last_xy() for t in self.active], proposal.shape)] = 0
+        r = TRACK_MASK_HALF
+        for t in self.active:
+            cx, cy = nearest_pixel(*t.last_xy())
+            proposal[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
 
     def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
         """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
@@ -506,14 +485,14 @@ class SGDSPF:
         starts = np.cumsum(sizes) - sizes
         mean = self._pp_means(members, starts) if len(sizes) else {}
         near_tracked = near_any_of(tracked, mean["x"], mean["y"]).tolist() if len(sizes) else []
-        started, groups = [], []  # the PPs that start a track, and their groups
+        picks, groups = [], []
         for k in range(len(sizes)):
             if not self.free_groups:
                 break
             x, y = float(mean["x"][k]), float(mean["y"][k])
-            if near_tracked[k] or near_any(tracked[len(tracked) - len(started):], x, y):
+            if near_tracked[k] or near_any(tracked[len(tracked) - len(groups):], x, y):  # or a new track
                 continue
-            started.append(k)
+            picks.append(starts[k] + resize_population(sizes[k], n_tpf, rng.random(max(n_tpf, sizes[k]))))
             groups.append(self.free_groups.pop())
             track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
                           log_ratios=deque(maxlen=self.p.icef_window),
@@ -529,15 +508,11 @@ class SGDSPF:
                 counts[emptied] = 0
                 self.tracks_pool.set_counts(counts)
             return
-        # one draw for all PPs, the same uniforms as one draw of max(N_tpf, size) per PP in turn
-        draws = [max(n_tpf, sizes[k]) for k in started]
-        uniforms = np.split(rng.random(sum(draws)), np.cumsum(draws)[:-1])
-        picks = [starts[k] + resize_population(sizes[k], n_tpf, u) for k, u in zip(started, uniforms)]
         order = np.argsort(groups)
         index = np.concatenate([picks[k] for k in order])
         # the emptied groups that no new track took are touched with no particles: their count becomes 0
         self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
-                                     {name: members[name][index] for name in STATE}, np.union1d(groups, emptied))
+                                     {name: members[name][index] for name in STATE}, sorted(set(groups + emptied)))
 
     @staticmethod
     def _pp_means(members: dict, starts: np.ndarray) -> dict:

@@ -193,27 +193,6 @@ def test_msw_from_candidates_skips_tracked_candidates():
     assert log_weight_ratio(2.0, msw_from_candidates(none, w, [])) == 0.0
 
 
-def test_track_squares_are_the_slices_around_each_tracks_nearest_pixel(rng):
-    """track_square_pixels and in_track_squares against a slice (and a distance test) per track, with tracks
-    at every border and corner of a 37×53 frame, on exact half-pixel positions and overlapping each other."""
-    from tbd_taichi.sgds import TRACK_MASK_HALF, in_track_squares, nearest_pixel, track_square_pixels
-
-    h, w, r = 37, 53, TRACK_MASK_HALF
-    tracked = [(-0.5, -0.5), (w - 0.51, h - 0.51), (0.49, 20.0), (w - 1.5, 0.5), (25.5, 17.5), (26.0, 18.0)]
-    tracked += [(float(x), float(y)) for x, y in zip(rng.uniform(-0.5, w - 0.5, 20), rng.uniform(-0.5, h - 0.5, 20))]
-    want = np.zeros((h, w), bool)
-    for x, y in tracked:
-        cx, cy = nearest_pixel(x, y)
-        want[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = True
-    got = np.zeros((h, w), bool)
-    got[track_square_pixels(tracked, (h, w))] = True
-    np.testing.assert_array_equal(got, want)
-    cy, cx = np.indices((h, w)).reshape(2, -1)
-    np.testing.assert_array_equal(in_track_squares(cx, cy, tracked), want.ravel())
-    assert not in_track_squares(cx, cy, []).any()
-    assert track_square_pixels([], (h, w))[0].shape == (0,)
-
-
 def test_ended_tracks_pfs_are_empty_after_the_frame():
     """A track's group is freed when it ends and its tracking PF is emptied by the frame's track load (or by
     a count update when no track starts): after every frame the tracking pool holds N_tpf particles in
@@ -232,16 +211,6 @@ def test_ended_tracks_pfs_are_empty_after_the_frame():
         state = tracker.tracks_pool.state()  # read from the device: the counts it holds
         np.testing.assert_array_equal(np.bincount(state["group"], minlength=4), want)
     assert ended >= 3  # tracks did end (and groups were reused: 4 groups only)
-
-
-def test_one_uniform_draw_splits_into_the_per_population_draws():
-    """_start_tracks draws every new track's uniforms at once: NumPy's Generator gives the same values as one
-    draw per population in turn."""
-    sizes = [500, 731, 500, 2]
-    one = np.split(np.random.default_rng([7, 3]).random(sum(sizes)), np.cumsum(sizes)[:-1])
-    rng = np.random.default_rng([7, 3])
-    for got, n in zip(one, sizes):
-        np.testing.assert_array_equal(got, rng.random(n))
 
 
 def test_proposal_maps_are_each_blocks_support_in_pixel_order(rng):
