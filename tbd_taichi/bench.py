@@ -20,6 +20,10 @@ in a second process, one frame ahead (:mod:`tbd_taichi.frontend`).  Their times 
 child's own, spent alongside the particle filters, and the stage ``waiting`` is this process's
 wait for the child (hand-over of the frame, copies of z and the proposal map).
 
+``machine`` names the CPU and its logical CPU count, ``versions`` Python, Taichi and NumPy: figures
+from different machines differ by 2× and more (docs/results/bench_machines.md), so every result says
+where it was measured.
+
 ``total`` is the sum of the stage medians (CPU work, in either process); ``update_ms`` the median
 wall time of one ``update`` call (or of the saliency step) and ``fps`` its inverse;
 ``peak_rss_mib`` the peak resident memory after the engine's run, of this process (everything
@@ -132,6 +136,14 @@ def machine_description() -> str:
     return f"{model}, {os.cpu_count()} CPUs"
 
 
+def software_versions() -> dict:
+    """Versions of Python, Taichi and NumPy, which the figures depend on."""
+    import taichi
+
+    return {"python": platform.python_version(), "taichi": ".".join(map(str, taichi.__version__)),
+            "numpy": np.__version__}
+
+
 def peak_rss_mib() -> float:
     """Peak resident set size of this process plus that of its largest ended child process (the
     tracker's front-end process), MiB."""
@@ -152,7 +164,8 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
-              "frontend_process": bool(frontend_process and pipeline), "engines": {}}
+              "frontend_process": bool(frontend_process and pipeline), "machine": machine_description(),
+              "versions": software_versions(), "engines": {}}
     for engine in engines:
         result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups, pipeline, frontend_process)
     return result
@@ -169,7 +182,8 @@ def format_table(result: dict) -> str:
     pool = f", {result['particles']} particles in {result['groups']} group(s)" if result.get("particles") else ""
     front = ", front end in a second process" if result.get("frontend_process") else ""
     lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
-             f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}", head]
+             f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}",
+             f"on {result.get('machine', 'an unrecorded machine')}", head]
     for stage in stages + ["update", "fps", "peak MiB"]:
         vals = {n: _row_value(engines[n], stage) for n in names}
         row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)
