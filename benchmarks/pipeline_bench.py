@@ -5,7 +5,7 @@ the 1.4 preset; on a GPU backend also 4096×4096.  Writes bench_pipeline_<arch>.
 into --out (default docs/results); with --frontend-process (normalisation and saliency in a
 second process) bench_pipeline_<arch>_frontend_process.md and .json.
 
-    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20] [--frontend-process] [--out docs/results]
+    python benchmarks/pipeline_bench.py [--arch cpu] [--frames 20] [--frontend-process] [--runs 1] [--out docs/results]
 """
 from __future__ import annotations
 
@@ -25,18 +25,20 @@ def main() -> None:
     parser.add_argument("--arch", default="cpu")
     parser.add_argument("--frames", type=int, default=20)
     parser.add_argument("--out", default=str(OUT), help="output folder (default docs/results)")
+    parser.add_argument("--runs", type=int, default=1, help="runs per engine, in turn (tbd-taichi bench --runs)")
     parser.add_argument("--frontend-process", action="store_true",
                         help="normalisation and saliency in a second process (SGDSPF(frontend_process=True))")
     args = parser.parse_args()
     cases = CASES + (GPU_CASES if args.arch != "cpu" else [])
-    flag = " --frontend-process" if args.frontend_process else ""
+    flag = (" --frontend-process" if args.frontend_process else "") + (f" --runs {args.runs}" if args.runs > 1 else "")
     results, lines = [], [f"# SGDS-PF pipeline benchmark ({args.arch}{flag})", "",
                           f"`python benchmarks/pipeline_bench.py --arch {args.arch} --frames {args.frames}{flag}` "
                           f"(same as `tbd-taichi bench --shape H W --snr S{flag}`); median ms/frame after a 3-frame "
                           "warm-up.", ""]
     for shape, snr in cases:
         frames = args.frames if shape[0] < 1024 else max(5, args.frames // (4 if shape[0] < 4096 else 8))
-        result = run_bench(shape, snr=snr, n_frames=frames, arch=args.arch, frontend_process=args.frontend_process)
+        result = run_bench(shape, snr=snr, n_frames=frames, arch=args.arch, frontend_process=args.frontend_process,
+                           runs=args.runs)
         results.append(result)
         table = format_table(result)
         print(table, flush=True)

@@ -24,6 +24,9 @@ wait for the child (hand-over of the frame, copies of z and the proposal map).
 from different machines differ by 2× and more (docs/results/bench_machines.md), so every result says
 where it was measured.
 
+``runs`` > 1 repeats each engine's run, the engines in turn and in alternating order; the medians pool all
+runs' frames, and each run's median update time and NumPy/Taichi ratio are listed too.
+
 ``total`` is the sum of the stage medians (CPU work, in either process); ``update_ms`` the median
 wall time of one ``update`` call (or of the saliency step) and ``fps`` its inverse;
 ``peak_rss_mib`` the peak resident memory after the engine's run, of this process (everything
@@ -96,14 +99,14 @@ def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
     return step, lambda: None
 
 
-def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
-                 pipeline: bool = True, frontend_process: bool = False) -> dict:
-    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W)."""
+def engine_samples(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
+                   pipeline: bool = True, frontend_process: bool = False) -> dict[str, list[float]]:
+    """One engine's run over raw ``frames`` (T, H, W): seconds per timed frame (after WARMUP) of each stage,
+    and of the whole step under "update"."""
     step, close = (pipeline_stepper if pipeline else saliency_stepper)(frames.shape[1:], snr, engine,
                                                                       frontend_process)
     pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
-    stages: dict[str, list[float]] = {}
-    update = []
+    samples: dict[str, list[float]] = {}
     for t, frame in enumerate(frames):
         t0 = time.perf_counter()
         seconds = step(frame)
@@ -114,14 +117,27 @@ def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0
             pool.step(t, z)
             seconds["particles"] = time.perf_counter() - t2
         if t >= WARMUP:
-            update.append(t1 - t0)
-            for name, value in seconds.items():
-                stages.setdefault(name, []).append(value)
+            for name, value in {**seconds, "update": t1 - t0}.items():
+                samples.setdefault(name, []).append(value)
     close()  # a front-end process ends here, so its peak memory counts below
-    medians = {name: _median_ms(v) for name, v in stages.items()}
-    update_ms = _median_ms(update)
+    return samples
+
+
+def engine_summary(runs: list[dict[str, list[float]]]) -> dict:
+    """Per-stage median ms/frame over the timed frames of all ``runs`` (``engine_samples`` results), their sum,
+    the median update time, fps, each run's median update time and the process's peak memory now."""
+    pooled = {name: [v for run in runs for v in run[name]] for name in runs[0]}
+    medians = {name: _median_ms(v) for name, v in pooled.items() if name != "update"}
+    update_ms = _median_ms(pooled["update"])
     return {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
-            "fps": 1e3 / update_ms, "peak_rss_mib": peak_rss_mib()}
+            "fps": 1e3 / update_ms, "run_update_ms": [_median_ms(run["update"]) for run in runs],
+            "peak_rss_mib": peak_rss_mib()}
+
+
+def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
+                 pipeline: bool = True, frontend_process: bool = False) -> dict:
+    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W), one run."""
+    return engine_summary([engine_samples(frames, snr, engine, particles, groups, pipeline, frontend_process)])
 
 
 @functools.lru_cache(maxsize=1)
@@ -156,18 +172,30 @@ def peak_rss_mib() -> float:
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
-              frontend_process: bool = False) -> dict:
+              frontend_process: bool = False, runs: int = 1) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
-    ``frontend_process``: the trackers run normalisation and saliency in a second process."""
+    ``frontend_process``: the trackers run normalisation and saliency in a second process.  ``runs`` > 1
+    repeats the engines' runs, in turn and in alternating order (taichi, numpy, numpy, taichi, …), so that a
+    VM's slow spells (10–50 % for minutes) fall on both; the medians pool every run's frames, and
+    ``run_update_ms`` lists each run's median update time (``run_ratios``: NumPy over Taichi, run by run)."""
+    if runs < 1:
+        raise ValueError(f"runs must be ≥ 1, got {runs}")
     backend.keep_freed_memory()
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
-              "frontend_process": bool(frontend_process and pipeline), "machine": machine_description(),
+              "frontend_process": bool(frontend_process and pipeline), "runs": runs, "machine": machine_description(),
               "versions": software_versions(), "engines": {}}
+    samples: dict[str, list] = {engine: [] for engine in engines}
+    for r in range(runs):
+        for engine in (engines if r % 2 == 0 else engines[::-1]):
+            samples[engine].append(engine_samples(frames, snr, engine, particles, groups, pipeline, frontend_process))
     for engine in engines:
-        result["engines"][engine] = bench_engine(frames, snr, engine, particles, groups, pipeline, frontend_process)
+        result["engines"][engine] = engine_summary(samples[engine])
+    if "taichi" in samples and "numpy" in samples:
+        result["run_ratios"] = [n / t for n, t in zip(result["engines"]["numpy"]["run_update_ms"],
+                                                     result["engines"]["taichi"]["run_update_ms"])]
     return result
 
 
@@ -181,6 +209,7 @@ def format_table(result: dict) -> str:
     head += f"{'numpy/taichi':>14}" if ratio else ""
     pool = f", {result['particles']} particles in {result['groups']} group(s)" if result.get("particles") else ""
     front = ", front end in a second process" if result.get("frontend_process") else ""
+    front += f", {result['runs']} runs each" if result.get("runs", 1) > 1 else ""
     lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
              f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}",
              f"on {result.get('machine', 'an unrecorded machine')}", head]
@@ -190,6 +219,11 @@ def format_table(result: dict) -> str:
         if ratio and stage not in ("fps", "peak MiB"):
             row += f"{vals['numpy'] / vals['taichi']:>13.1f}x"
         lines.append(row)
+    if result.get("runs", 1) > 1:
+        for n in names:
+            lines.append(f"{n} update per run: " + ", ".join(f"{v:.2f}" for v in engines[n]["run_update_ms"]) + " ms")
+        if "run_ratios" in result:
+            lines.append("numpy/taichi per run: " + ", ".join(f"{v:.1f}x" for v in result["run_ratios"]))
     return "\n".join(lines)
 
 

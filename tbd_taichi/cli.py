@@ -143,9 +143,11 @@ def cmd_bench(args) -> int:
         raise TBDError(f"--engines takes a comma list of taichi,numpy; got {args.engines!r}")
     if args.particles < 0 or args.groups < 1 or (args.particles and args.particles < args.groups):
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
+    if args.runs < 1:
+        raise TBDError(f"--runs must be ≥ 1, got {args.runs}")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
-                       frontend_process=args.frontend_process)
+                       frontend_process=args.frontend_process, runs=args.runs)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -295,6 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--snr", type=float, default=1.4, help="SNR preset: the lowest SNR to detect (default 1.4)")
     be.add_argument("--frames", type=int, default=20, help="timed frames per engine (default 20)")
     be.add_argument("--engines", default="taichi,numpy", help="comma list of engines (default taichi,numpy)")
+    be.add_argument("--runs", type=int, default=1,
+                    help="runs per engine, taken in turn in alternating order so that a VM's slow spells fall on "
+                         "both; medians over all runs' frames, and each run's update time and ratio (default 1)")
     be.add_argument("--particles", type=int, default=0,
                     help="also time one particle-filter step of a pool this large (stage 'particles'; default 0: off)")
     be.add_argument("--groups", type=int, default=1, help="filters the pool is split into (default 1)")

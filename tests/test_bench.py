@@ -27,3 +27,17 @@ def test_pipeline_bench_reports_every_stage_for_both_engines_and_the_machine():
     total = next(line for line in lines if line.startswith("total")).split()
     ratio = result["engines"]["numpy"]["total"] / result["engines"]["taichi"]["total"]
     assert total[-1] == f"{ratio:.1f}x"
+
+
+@pytest.mark.slow
+def test_runs_alternate_the_engines_and_report_each_run():
+    """--runs 2: every run's median update time per engine and their ratio; the stage medians pool both runs."""
+    result = run_bench((64, 64), snr=3.0, n_frames=3, runs=2)
+    taichi, numpy = result["engines"]["taichi"], result["engines"]["numpy"]
+    assert result["runs"] == 2 and len(taichi["run_update_ms"]) == len(numpy["run_update_ms"]) == 2
+    assert result["run_ratios"] == pytest.approx([n / t for n, t in zip(numpy["run_update_ms"], taichi["run_update_ms"])])
+    assert min(taichi["run_update_ms"]) <= taichi["update_ms"] <= max(taichi["run_update_ms"])
+    table = format_table(result)
+    assert "2 runs each" in table and "numpy/taichi per run: " in table
+    with pytest.raises(ValueError, match="runs must be"):
+        run_bench((64, 64), runs=0)
