@@ -42,6 +42,7 @@ import time
 import numpy as np
 
 from . import backend
+from .errors import ParameterError
 from .normalize import normalise_frame
 from .particles import ParticlePool
 from .pf import birth_intensity_range
@@ -134,12 +135,6 @@ def engine_summary(runs: list[dict[str, list[float]]]) -> dict:
             "peak_rss_mib": peak_rss_mib()}
 
 
-def bench_engine(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
-                 pipeline: bool = True, frontend_process: bool = False) -> dict:
-    """Per-stage median ms/frame for one engine on raw ``frames`` (T, H, W), one run."""
-    return engine_summary([engine_samples(frames, snr, engine, particles, groups, pipeline, frontend_process)])
-
-
 @functools.lru_cache(maxsize=1)
 def machine_description() -> str:
     """The CPU model and logical CPU count, e.g. "Intel(R) Xeon(R) Processor, 16 CPUs"."""
@@ -179,7 +174,7 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     VM's slow spells (10–50 % for minutes) fall on both; the medians pool every run's frames, and
     ``run_update_ms`` lists each run's median update time (``run_ratios``: NumPy over Taichi, run by run)."""
     if runs < 1:
-        raise ValueError(f"runs must be ≥ 1, got {runs}")
+        raise ParameterError(f"runs must be ≥ 1, got {runs}")
     backend.keep_freed_memory()
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames

@@ -143,8 +143,6 @@ def cmd_bench(args) -> int:
         raise TBDError(f"--engines takes a comma list of taichi,numpy; got {args.engines!r}")
     if args.particles < 0 or args.groups < 1 or (args.particles and args.particles < args.groups):
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
-    if args.runs < 1:
-        raise TBDError(f"--runs must be ≥ 1, got {args.runs}")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
                        frontend_process=args.frontend_process, runs=args.runs)

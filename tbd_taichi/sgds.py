@@ -315,8 +315,7 @@ class SGDSPF:
         self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
-        self.ended_groups: list[int] = []  # groups of tracks ended this frame, freed by _release_groups
-        self.emptied_groups: list[int] = []  # freed groups whose tracking PFs _start_tracks empties
+        self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
         self.active: list[Track] = []
         self.finished: list[Track] = []
         self.next_track_id = 1
@@ -479,8 +478,8 @@ class SGDSPF:
                       tracked: list) -> None:
         """A tracking PF for each handed-over PP: ``members`` holds their particles' states, PP after
         PP (``sizes`` each), resized to N_tpf particles (Algorithm 2), all loaded in one launch, which also
-        empties the groups of the tracks ended this frame (:meth:`_release_groups`).  ``tracked``: the active
-        tracks' last positions, to which the new tracks are added."""
+        empties the groups of the tracks ended this frame (``ended_groups``; one launch fewer than emptying them
+        apart).  ``tracked``: the active tracks' last positions, to which the new tracks are added."""
         n_tpf = self.p.N_tpf
         starts = np.cumsum(sizes) - sizes
         mean = self._pp_means(members, starts) if len(sizes) else {}
@@ -501,17 +500,13 @@ class SGDSPF:
             track.path.append((f, x, y, float(mean["vx"][k]), float(mean["vy"][k]), float(mean["inten"][k]), 1.0))
             self.active.append(track)
             tracked.append((x, y))
-        emptied, self.emptied_groups = self.emptied_groups, []
-        if not groups:
-            if emptied:
-                counts = self.tracks_pool.counts.copy()
-                counts[emptied] = 0
-                self.tracks_pool.set_counts(counts)
+        emptied, self.ended_groups = self.ended_groups, []
+        if not groups and not emptied:
             return
         order = np.argsort(groups)
-        index = np.concatenate([picks[k] for k in order])
+        index = np.concatenate([picks[k] for k in order]) if groups else np.zeros(0, np.int64)
         # the emptied groups that no new track took are touched with no particles: their count becomes 0
-        self.tracks_pool.load_states(np.repeat(np.asarray(groups)[order], n_tpf),
+        self.tracks_pool.load_states(np.repeat(np.asarray(groups, np.int64)[order], n_tpf),
                                      {name: members[name][index] for name in STATE}, sorted(set(groups + emptied)))
 
     @staticmethod
@@ -560,7 +555,6 @@ class SGDSPF:
             if self._reportable(t, z) and t.path[-1][0] == f:
                 rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
         self._merge_duplicates()
-        self._release_groups()
         return rows
 
     def _reportable(self, t: Track, z: np.ndarray) -> bool:
@@ -593,16 +587,10 @@ class SGDSPF:
 
     def _end_track(self, t: Track) -> None:
         self.active.remove(t)
+        self.free_groups.append(t.group)
         self.ended_groups.append(t.group)
         if t.reported and self.history:
             self.finished.append(t)
-
-    def _release_groups(self) -> None:
-        """Free the groups of the tracks ended this frame.  Their tracking PFs are emptied by the launch that
-        loads this frame's new tracks (:meth:`_start_tracks`), one launch fewer."""
-        self.free_groups += self.ended_groups
-        self.emptied_groups += self.ended_groups
-        self.ended_groups = []
 
 
 def make_tracker(method: str, shape, **kw):
