@@ -368,10 +368,12 @@ class ParticleKernels(PopulationKernels):
             y = self.y[b, i] + self.vy[b, i] + c11 * n3
             self.x[b, i] = x
             self.y[b, i] = y
-            self.vx[b, i] += c21 * n1 + c22 * n2
-            self.vy[b, i] += c21 * n3 + c22 * n4
+            # plain stores: ``field[i] += v`` is Taichi's atomic add, a locked compare-and-swap loop in a
+            # parallel CPU task (the split step), though no other thread writes slot i
+            self.vx[b, i] = self.vx[b, i] + (c21 * n1 + c22 * n2)
+            self.vy[b, i] = self.vy[b, i] + (c21 * n3 + c22 * n4)
             self.inten[b, i] = ti.max(self.inten[b, i] + sq2 * n5, i_floor)
-            self.tp[b, i] += 1
+            self.tp[b, i] = self.tp[b, i] + 1
             if x < -0.5 or x >= width - 0.5 or y < -0.5 or y >= height - 0.5:
                 self.e[b, i] = 0
 
@@ -518,7 +520,7 @@ class ParticleKernels(PopulationKernels):
         for t in range(self.tile_start.shape[0]):
             pre = self.tile_prefix[t]
             for i in range(self.tile_start[t], self.tile_end(t)):
-                self.cum[i] += pre
+                self.cum[i] = self.cum[i] + pre
 
     @ti.func
     def normalise_weights(self):
