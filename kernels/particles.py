@@ -743,31 +743,23 @@ class ParticleKernels(PopulationKernels):
     def fused_step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(), q1: ti.f32, q2: ti.f32,
                    i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32,
                    best: ti.template(), z: ti.template(), n_out: ti.template(), systematic: ti.template()):
-        """Steps 1–5 for a pool whose tile loops are split over the threads (copied newborns, kind 2, only with
-        whole groups per thread).  Whole groups per thread: one pass, ``stepped_group``.  Tiles dealt out one by
-        one (``tile_passes``): three passes over the tiles instead of eight, since each parallel pass costs a start
+        """Steps 1–5 for a pool without copied newborns (kind 2) whose tile loops are split over the
+        threads: three passes over the tiles instead of eight, since each parallel pass costs a start
         of Taichi's thread pool (about 50 µs on the 2-core VM).  Pass 1: existence, top-up, newborn
         draws, propagation, log-weight and tile maxima, each a loop over the tile's slots (no slot reads
         another: only kind 2 copies do; one loop per stage ran pass 1 in 1.80 ms, one loop doing all
         stages slot by slot in 2.0 ms: the kernel profiler, 1.4 preset at 320×256); pass 2: each tile's
         cumulative weights and spacings; pass 3: each tile's parents, then the gather of its outputs.
         Serial steps between them combine the tiles of each group.  The same operations on the same
-        slots as the unfused step, so the same bits."""
+        slots as the unfused step, so the same bits.  (``step_pair``'s single pass, ``stepped_group``, would
+        also do here with whole groups per thread, but it adds about 12 s to the kernel's first compile, for the
+        frames without an active track.)"""
         self.store_counts(counts)
         values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
-        if ti.static(self.tiles_by_group):  # whole groups per thread: one pass
-            self.for_groups(self.stepped_group, {'values': values, 'z': z, 'best': best, 'n_out': n_out,
-                                                 'systematic': systematic, 'resampled': self.resampled_tile,
-                                                 'moments': ()})
+        if ti.static(self.tiles_by_group):
+            self.for_groups(self.predicted_group, {'values': values, 'z': z})
         else:
-            self.tile_passes(values, z, best, n_out, systematic)
-
-    @ti.func
-    def tile_passes(self, values: ti.template(), z: ti.template(), best: ti.template(), n_out: ti.template(),
-                    systematic: ti.template()):
-        """``fused_step`` with the tiles dealt out one by one: three passes, with the serial steps between them."""
-        seed, frame, b = values[0], values[1], values[2]
-        self.for_tiles(self.predicted_tile, {'values': values, 'z': z})
+            self.for_tiles(self.predicted_tile, {'values': values, 'z': z})
         self.group_maxima()
         ti.loop_config(serialize=True)
         for g in range(best.shape[0]):
@@ -798,7 +790,8 @@ class ParticleKernels(PopulationKernels):
         work and the serial pool ``other`` no longer leaves a core idle; with ``other``'s ``estimates`` into
         ``moments``.  Each group is stepped as ``fused_step`` steps it, so both pools get the bits of their own
         ``step``.  (One pass instead of three: step_with of 6 × 8000 + 32 × 500 particles at 320×256
-        5.2–5.4 → 4.7–4.8 ms, in one process.)"""
+        5.2–5.4 → 4.7–4.8 ms, in one process; the first compile of an ``SGDSPF`` configuration took 62 s before,
+        75–91 s after, single runs without the offline cache.)"""
         self.store_counts(counts)
         other.store_counts(other_counts)
         values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
@@ -814,7 +807,7 @@ class ParticleKernels(PopulationKernels):
 
     @ti.func
     def stepped_group(self, g: ti.i32, loop: ti.template()):
-        """``fused_step`` for group g alone, by the thread that owns the group (whole groups per thread): pass 1
+        """``fused_step``'s three passes for group g alone, by the thread that owns the group (whole groups per thread): pass 1
         (``predicted_group``), its maxima, pass 2 (``weighted_tile``), its prefix and spacing total, pass 3
         (``loop['resampled']``) and its moment sums, with no barrier between them, since no stage reads another
         group.  One start of the thread pool a step instead of three (about 60 µs each on the 2-core VM), and
