@@ -8,7 +8,9 @@ to the host:
 * :meth:`PopulationKernels.eliminate`: Eq. 37's spread-out random elimination of ``take`` of a
   PP's particles, and Eq. 38's sums over the survivors;
 * :meth:`PopulationKernels.hand_over`: drops whole PPs (handed over, or already tracked), writes
-  the index image P_pp and compacts the pool.
+  the index image P_pp and compacts the pool;
+* :meth:`PopulationKernels.eliminate_and_hand_over`: both in one launch, with Eq. 38's potential-target
+  test deciding which PPs are handed over or dropped (the tracker's path: no host round trip between them).
 
 Particles are addressed in *state order* (group, then slot), as ``ParticlePool.state`` lists
 them.  A mixin of ``ParticleKernels`` (it uses the pool's fields); the NumPy twin is
@@ -33,6 +35,9 @@ class PopulationKernels:
             ti.field(ti.i32, capacity)
         self.pixel_key = ti.field(ti.i64, shape=frame_shape)
         self.pp_sums = ti.field(ti.f64, shape=(capacity, N_PP_SUMS))  # eliminate's sums, copied out at its end
+        # eliminate_and_hand_over's decisions: per PP drop flag and rank, per rank its first member column
+        self.pp_drop, self.pp_rank, self.pp_cursor = ti.field(ti.i8, capacity), ti.field(ti.i32, capacity), \
+            ti.field(ti.i32, capacity)
 
     @ti.func
     def state_starts(self):
@@ -68,6 +73,15 @@ class PopulationKernels:
         survivors, Σ x and Σ y over survivors with E = 1), added in state order (f64).  pp, sizes
         and keep stay on the device for :meth:`hand_over`.  A PP lies in one group, so groups run
         in parallel."""
+        self.eliminate_particles(b, table, ti.static((pp, keep)))
+        ti.loop_config(serialize=True)  # the sums pass through a field: an argument array's pointer is
+        for k in range(table.shape[1]):  # reloaded after every store, which made the pass slower
+            for c in ti.static(range(N_PP_SUMS)):
+                sums[k, c] = self.pp_sums[k, c]
+
+    @ti.func
+    def eliminate_particles(self, b: ti.i32, table: ti.template(), arrays: ti.template()):
+        """``eliminate``'s work up to the sums in ``pp_sums``; ``arrays``: (pp,) or (pp, keep)."""
         self.state_starts()
         ti.loop_config(serialize=True)
         for k in range(table.shape[1]):
@@ -77,16 +91,12 @@ class PopulationKernels:
             self.pp_acc[k] = ti.min(ti.cast(table[2, k] * table[0, k], ti.i32), n_k - 1)
             for c in ti.static(range(N_PP_SUMS)):
                 self.pp_sums[k, c] = 0.0
-        self.for_states(self.remove_spread, b, ti.static((pp, keep)))
-        ti.loop_config(serialize=True)  # the sums pass through a field: an argument array's pointer is
-        for k in range(table.shape[1]):  # reloaded after every store, which made the pass slower
-            for c in ti.static(range(N_PP_SUMS)):
-                sums[k, c] = self.pp_sums[k, c]
+        self.for_states(self.remove_spread, b, arrays)
 
     @ti.func
     def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
         """``eliminate`` for particle s (slot i)."""
-        pp, keep = ti.static(arrays)
+        pp = ti.static(arrays[0])
         sums = ti.static(self.pp_sums)
         k = pp[s]
         self.state_pp[s] = k
@@ -94,7 +104,8 @@ class PopulationKernels:
         gone = a >= self.pp_size[k]
         self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
         kept = ti.cast(not gone, ti.i8)
-        keep[s] = kept
+        if ti.static(len(arrays) > 1):
+            arrays[1][s] = kept
         self.state_keep[s] = kept
         if not gone:
             sums[k, P_KEPT] += 1.0
@@ -132,6 +143,13 @@ class PopulationKernels:
         survivors of elimination in each PP k with rank[k] = r ≥ 0 (the handed-over PPs) are first
         copied out, in state order from column cursor[r] on (the host sets each PP's first column):
         rows x, vx, y, vy, I of ``floats`` and E, Tp, Seq of ``ints``, as ``read_slots`` gives them."""
+        self.hand_over_particles(b, drop, index, counts, ti.static((rank, cursor, floats, ints)), members)
+
+    @ti.func
+    def hand_over_particles(self, b: ti.i32, drop: ti.template(), index: ti.template(), counts: ti.template(),
+                            copies: ti.template(), members: ti.template()):
+        """``hand_over``'s work; ``copies``: (rank, cursor, floats, ints)."""
+        rank, cursor, floats, ints = ti.static(copies)
         h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
@@ -147,6 +165,60 @@ class PopulationKernels:
         ti.loop_config(serialize=True)
         for g in range(counts.shape[0]):
             counts[g] = self.n[g]
+
+    @ti.kernel
+    def eliminate_and_hand_over(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                                table: ti.types.ndarray(dtype=ti.f64, ndim=2),
+                                rule: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                                tracked: ti.types.ndarray(dtype=ti.f64, ndim=2),
+                                index: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                                counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                                outcome: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                                floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                                ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """:meth:`eliminate`, the potential-target decisions (:meth:`potential_targets`) and :meth:`hand_over`
+        with members in one launch.  ``rule``: (T_PTp, T_PE, squared duplicate radius in px², most PPs to hand
+        over, active tracks); ``tracked``: their positions, rows (x, y) in px.  ``outcome``: per PP k its
+        hand-over rank (row 0; −1: not handed over) and its survivors of elimination (row 1); the handed PPs'
+        survivors fill ``floats`` and ``ints`` in rank order, as ``hand_over`` writes them."""
+        self.eliminate_particles(b, table, ti.static((pp,)))
+        self.potential_targets(table.shape[1], rule, tracked, outcome)
+        self.hand_over_particles(b, self.pp_drop, index, counts,
+                                 ti.static((self.pp_rank, self.pp_cursor, floats, ints)), True)
+
+    @ti.func
+    def potential_targets(self, n_pp: ti.i32, rule: ti.template(), tracked: ti.template(), outcome: ti.template()):
+        """Algorithm 1's hand-over decisions from Eq. 38's sums (``pp_sums``), PP after PP in PP order: a PP with
+        survivors, E = 1 among them, PTp = ΣTp/N_pp > T_PTp and PE = ΣE/N_pp > T_PE is a potential target.  It
+        is dropped if its mean position (E = 1 survivors, px) lies within the duplicate radius of an active
+        track (tracked already), else handed over (and dropped) while fewer than the allowed number are.  Sets
+        ``pp_drop``, ``pp_rank``, the handed PPs' first member columns ``pp_cursor``, and ``outcome``."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):  # one task
+            t_ptp, t_pe, r2 = rule[0], rule[1], rule[2]
+            most, n_tracked = ti.cast(rule[3], ti.i32), ti.cast(rule[4], ti.i32)
+            handed, column = 0, 0
+            for k in range(n_pp):
+                n, ne = self.pp_sums[k, P_KEPT], self.pp_sums[k, P_KEPT_E]
+                drop, rank = 0, -1
+                if n > 0 and ne > 0 and self.pp_sums[k, P_TP] / n > t_ptp and ne / n > t_pe:
+                    px, py = self.pp_sums[k, P_X] / ne, self.pp_sums[k, P_Y] / ne
+                    near = 0
+                    for j in range(n_tracked):
+                        dx, dy = px - tracked[j, 0], py - tracked[j, 1]
+                        if dx * dx + dy * dy < r2:
+                            near = 1
+                    if near or handed < most:
+                        drop = 1
+                    if not near and handed < most:
+                        rank = handed
+                        self.pp_cursor[handed] = column
+                        column += ti.cast(n, ti.i32)
+                        handed += 1
+                self.pp_drop[k] = ti.cast(drop, ti.i8)
+                self.pp_rank[k] = rank
+                outcome[0, k] = rank
+                outcome[1, k] = ti.cast(n, ti.i32)
 
     @ti.func
     def copy_and_claim(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):

@@ -185,8 +185,10 @@ def update_confidence(c: float, icef_value: float, scef_value: float) -> float:
 
 
 def near_any(points: list, x: float, y: float) -> bool:
-    """Whether (x, y) lies within DUPLICATE_RADIUS px of any of ``points`` [(x, y), …]."""
-    return any(math.hypot(x - px, y - py) < DUPLICATE_RADIUS for px, py in points)
+    """Whether (x, y) lies within DUPLICATE_RADIUS px of any of ``points`` [(x, y), …]: dx² + dy² < R² in
+    f64, as the hand-over kernel tests it."""
+    r2 = DUPLICATE_RADIUS * DUPLICATE_RADIUS
+    return any((x - px) * (x - px) + (y - py) * (y - py) < r2 for px, py in points)
 
 
 def near_any_of(points: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -194,7 +196,8 @@ def near_any_of(points: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     if not points or not len(x):
         return np.zeros(len(x), bool)
     p = np.asarray(points, np.float64)
-    return (np.hypot(x[:, None] - p[:, 0], y[:, None] - p[:, 1]) < DUPLICATE_RADIUS).any(axis=1)
+    dx, dy = x[:, None] - p[:, 0], y[:, None] - p[:, 1]
+    return (dx * dx + dy * dy < DUPLICATE_RADIUS * DUPLICATE_RADIUS).any(axis=1)
 
 
 def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
@@ -446,32 +449,19 @@ class SGDSPF:
         searching particles' Seq in state order (from the step).
 
         A PP is a (block, Seq) pair.  The host numbers the PPs of all blocks at once and decides the
-        quotas and hand-overs; the per-particle work runs on the pool (``ParticlePool.eliminate`` and
-        ``hand_over``), so only the handed-over particles' states come to the host."""
-        from .kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
-
+        quotas; the pool eliminates, applies Algorithm 1's potential-target rule (PTp > T_PTp, PE > T_PE
+        with PE = ΣE/N_pp, Eq. 38; a potential target near an active track is dropped, the others are handed
+        over while tracking PFs are free) and hands over in one launch
+        (``ParticlePool.eliminate_and_hand_over``), so only the handed-over particles' states come to the
+        host, PP after PP, each in state order."""
         p, pool = self.p, self.search
         pp_block, inverse, counts = slab_populations(pool.counts, seq)
         take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
-        _, sums = pool.eliminate(inverse, counts, take, rng.random(len(counts)))
-        n_pp, ne = sums[:, P_KEPT], sums[:, P_KEPT_E]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            pe, ptp = ne / n_pp, sums[:, P_TP] / n_pp  # Eq. 38 (PE = ΣE/N_pp)
-            px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
-        drop = np.zeros(len(counts), bool)
-        handed = []  # the PPs handed over, in PP order
         tracked = [t.last_xy() for t in self.active]
-        potential = np.flatnonzero((n_pp > 0) & (ptp > p.T_PTp) & (pe > p.T_PE) & (ne > 0))
-        for k, near in zip(potential.tolist(), near_any_of(tracked, px[potential], py[potential]).tolist()):
-            if near:  # the target is tracked already
-                drop[k] = True
-            elif len(handed) < len(self.free_groups):
-                drop[k] = True
-                handed.append(k)
-        # the handed PPs' kept particles (PP after PP, each in state order) come back from the same launch (an
-        # empty list too: one compiled variant of the kernel)
-        members, sizes = pool.hand_over(drop, self.pp_index, handed)
+        members, sizes = pool.eliminate_and_hand_over(inverse, counts, take, rng.random(len(counts)), self.pp_index,
+                                                      p.T_PTp, p.T_PE, tracked, DUPLICATE_RADIUS,
+                                                      len(self.free_groups))
         self._start_tracks(f, members, sizes, rng, tracked)
 
     def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,

@@ -196,3 +196,70 @@ def test_slab_populations_with_empty_blocks_match_unique_pairs(seq_span):
     for a, b in zip(got, populations(group, seq)):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(seq, seq_before)
+
+
+def host_decisions(sums, t_ptp, t_pe, tracked, radius, most):
+    """Algorithm 1's hand-over rule written out PP by PP on the host: (drop flags, handed PPs in order)."""
+    drop, handed = np.zeros(len(sums), bool), []
+    for k, (n, ne, tp, sx, sy) in enumerate(sums[:, [P_KEPT, P_KEPT_E, P_TP, P_X, P_Y]].tolist()):
+        if n > 0 and ne > 0 and tp / n > t_ptp and ne / n > t_pe:
+            near = any((sx / ne - tx) ** 2 + (sy / ne - ty) ** 2 < radius ** 2 for tx, ty in tracked)
+            if near or len(handed) < most:
+                drop[k] = True
+            if not near and len(handed) < most:
+                handed.append(k)
+    return drop, handed
+
+
+@pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])
+@pytest.mark.parametrize("most", [0, 2, 50])
+def test_one_launch_hand_over_matches_eliminate_then_hand_over(engine, most, monkeypatch):
+    """eliminate_and_hand_over gives the same pool, index image and members as eliminate, the rule decided on
+    the host, and hand_over; a track placed on a potential target's mean drops it without a hand-over."""
+    engine = pool_engine(engine, monkeypatch)
+    two, one = make_pool(engine, rng_seed=5), make_pool(engine, rng_seed=5)
+    st = two.state()
+    pp_block, inverse, counts = populations(st["group"], st["seq"])
+    take = eliminated_per_population(pp_block, counts, 200)
+    phase = np.random.default_rng(9).random(len(counts))
+    t_ptp, t_pe = 3.0, 0.6
+    _, sums = two.eliminate(inverse, counts, take, phase)
+    potential = [k for k in range(len(counts)) if host_decisions(sums[k:k + 1], t_ptp, t_pe, [], 2.0, 1)[1]]
+    assert len(potential) >= 4  # the test needs potential targets
+    k0 = potential[1]
+    tracked = [(sums[k0, P_X] / sums[k0, P_KEPT_E] + 1.5, sums[k0, P_Y] / sums[k0, P_KEPT_E] - 1.0), (-50.0, -50.0)]
+    drop, handed = host_decisions(sums, t_ptp, t_pe, tracked, 2.0, most)
+    assert drop[k0] and k0 not in handed and len(handed) <= most and (most == 0 or len(handed) >= 2)
+    index_two, index_one = np.zeros(SHAPE, np.int32), np.full(SHAPE, -3, np.int32)
+    members_two, sizes_two = two.hand_over(drop, index_two, handed)
+    members_one, sizes_one = one.eliminate_and_hand_over(inverse, counts, take, phase, index_one, t_ptp, t_pe,
+                                                         tracked, 2.0, most)
+    assert sizes_one == sizes_two
+    np.testing.assert_array_equal(index_one, index_two)
+    for key in members_two:
+        np.testing.assert_array_equal(members_one[key], members_two[key], err_msg=key)
+    after_two, after_one = two.state(), one.state()
+    for key in after_two:
+        np.testing.assert_array_equal(after_one[key], after_two[key], err_msg=key)
+    np.testing.assert_array_equal(one.counts, two.counts)
+
+
+def test_one_launch_hand_over_engines_agree_without_tracks():
+    """No active track (an empty list) and no room for hand-overs on both engines: same pool and index image."""
+    pools = {engine: make_pool(engine, rng_seed=8) for engine in ("taichi", "numpy")}
+    st = pools["numpy"].state()
+    pp_block, inverse, counts = populations(st["group"], st["seq"])
+    take = eliminated_per_population(pp_block, counts, 100)
+    phase = np.random.default_rng(4).random(len(counts))
+    out = {}
+    for engine, pool in pools.items():
+        index = np.zeros(SHAPE, np.int32)
+        members, sizes = pool.eliminate_and_hand_over(inverse, counts, take, phase, index, 2.0, 0.5, [], 2.0, 3)
+        out[engine] = (index, members, sizes, pool.state())
+    assert len(out["numpy"][2]) == 3
+    assert out["taichi"][2] == out["numpy"][2]
+    np.testing.assert_array_equal(out["taichi"][0], out["numpy"][0])
+    for key in out["numpy"][1]:
+        np.testing.assert_array_equal(out["taichi"][1][key], out["numpy"][1][key], err_msg=key)
+    for key in out["numpy"][3]:
+        np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)

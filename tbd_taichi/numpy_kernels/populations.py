@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+from ..kernels.populations import N_PP_SUMS, P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 
 
 def stable_order(keys: np.ndarray) -> np.ndarray:
@@ -34,6 +34,24 @@ def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: 
     size, take = size.astype(np.int64), take.astype(np.int64)
     q = np.minimum((phase * size).astype(np.int64), size - 1)
     return ((rank + 1) * take + q) // size > (rank * take + q) // size
+
+
+def potential_targets(sums: np.ndarray, rule: np.ndarray, tracked: np.ndarray):
+    """Twin of ``PopulationKernels.potential_targets``, vectorised: (drop flags, hand-over ranks) per PP from
+    Eq. 38's sums; ``rule`` = (T_PTp, T_PE, squared duplicate radius, most handed, active tracks)."""
+    t_ptp, t_pe, r2 = rule[:3]
+    most, n_tracked = int(rule[3]), int(rule[4])
+    n, ne = sums[:, P_KEPT], sums[:, P_KEPT_E]
+    with np.errstate(invalid="ignore", divide="ignore"):  # n or ne = 0: NaN, never above a threshold
+        potential = (n > 0) & (ne > 0) & (sums[:, P_TP] / n > t_ptp) & (ne / n > t_pe)
+        px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
+    near = np.zeros(len(n), bool)
+    for tx, ty in tracked[:n_tracked].tolist():
+        near |= (px - tx) * (px - tx) + (py - ty) * (py - ty) < r2
+    handed = np.flatnonzero(potential & ~near)[:most]
+    rank = np.full(len(n), -1, np.int32)
+    rank[handed] = np.arange(len(handed), dtype=np.int32)
+    return (potential & near) | (rank >= 0), rank
 
 
 class NumpyPopulationKernels:
@@ -76,6 +94,16 @@ class NumpyPopulationKernels:
         index[y[inside][order], x[inside][order]] = seq[inside][order]
         self.keep_particles(b, keep)
         counts[:] = self.n
+
+    def eliminate_and_hand_over(self, b, pp, table, rule, tracked, index, counts, outcome, floats, ints) -> None:
+        sums = np.zeros((table.shape[1], N_PP_SUMS))
+        self.eliminate(b, pp, table, np.zeros(len(pp), np.int8), sums)
+        drop, rank = potential_targets(sums, rule, tracked)
+        kept = sums[:, P_KEPT].astype(np.int32)
+        sizes = kept[rank >= 0]
+        cursor = np.concatenate([[0], np.cumsum(sizes)])  # each handed PP's first column (cursor[0] even if none)
+        self.hand_over(b, drop.astype(np.int8), index, counts, rank, cursor, floats, ints, True)
+        outcome[0], outcome[1] = rank, kept
 
     def read_seq(self, b, seq) -> None:
         live = self.seq[b, self.live_slots()]
