@@ -1,7 +1,7 @@
 """Particle-population bookkeeping of SGDS-PF's searching PF (Eqs. 36–38) on the particle pool.
 
 A particle population (PP) is the set of a block's particles that share a Seq (Eq. 36).  The
-host numbers the PPs (block, then Seq) and decides Eq. 37's quotas and the hand-over; these
+host numbers the PPs (block, then Seq) and decides Eq. 37's quotas; these
 kernels do the per-particle work on the pool's own fields, so the particles' states never go
 to the host:
 

@@ -565,9 +565,14 @@ class SGDSPF:
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
         and a track that has ended ends no other."""
+        if len(self.active) < 2:
+            return
         tracks = sorted(self.active, key=lambda t: t.track_id)
-        xy = np.array([t.last_xy() for t in tracks]).reshape(-1, 2)
-        close = np.triu(np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) < DUPLICATE_RADIUS, 1)
+        xy = np.array([t.last_xy() for t in tracks])
+        dx, dy = xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1]
+        close = np.triu(dx * dx + dy * dy < DUPLICATE_RADIUS * DUPLICATE_RADIUS, 1)  # near_any's test
+        if not close.any():
+            return
         alive = np.ones(len(tracks), bool)
         for i in np.flatnonzero(close.any(axis=1)):
             if alive[i]:

@@ -509,3 +509,21 @@ def test_near_any_of_agrees_with_near_any_point_by_point(rng):
     assert 0 < want.sum() < len(want) and want[-3:].tolist() == [False, True, False]
     assert near_any_of([], x, y).tolist() == [False] * len(x)
     assert near_any_of(points, x[:0], y[:0]).shape == (0,)
+
+
+def test_merge_duplicates_ends_the_younger_of_close_tracks():
+    """Tracks 1–2 are 1.9 px apart (2 ends), 3–4 exactly 2 px (both stay), 5–6–7 each 1.5 px from the next:
+    5 ends 6, and 7 (1.5 px from the ended 6, 3 px from 5) stays; the ended tracks' groups are freed."""
+    from tbd_taichi.sgds import Track
+
+    tracker = SGDSPF((40, 40), snr=2.0, engine="numpy")
+    places = {1: (5.0, 5.0), 2: (6.9, 5.0), 3: (20.0, 5.0), 4: (20.0, 7.0), 5: (5.0, 20.0), 6: (6.5, 20.0),
+              7: (8.0, 20.0)}
+    tracker.active = [Track(k, k, path=deque([(0, x, y, 0.0, 0.0, 1.0, 1.0)])) for k, (x, y) in places.items()]
+    tracker.free_groups, tracker.ended_groups = [], []
+    tracker._merge_duplicates()
+    assert [t.track_id for t in tracker.active] == [1, 3, 4, 5, 7]
+    assert sorted(tracker.free_groups) == [2, 6] and sorted(tracker.ended_groups) == [2, 6]
+    tracker.active = tracker.active[:1]
+    tracker._merge_duplicates()  # one track: nothing to compare
+    assert [t.track_id for t in tracker.active] == [1]
