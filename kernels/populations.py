@@ -208,10 +208,10 @@ class PopulationKernels:
                         dx, dy = px - tracked[j, 0], py - tracked[j, 1]
                         if dx * dx + dy * dy < r2:
                             near = 1
-                    if near or handed < most:
+                    if near:  # tracked already
                         drop = 1
-                    if not near and handed < most:
-                        rank = handed
+                    elif handed < most:
+                        drop, rank = 1, handed
                         self.pp_cursor[handed] = column
                         column += ti.cast(n, ti.i32)
                         handed += 1

@@ -191,13 +191,18 @@ def near_any(points: list, x: float, y: float) -> bool:
     return any((x - px) * (x - px) + (y - py) * (y - py) < r2 for px, py in points)
 
 
+def within_duplicate_radius(x: np.ndarray, y: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """(len(x), len(px)) bool: position k lies within DUPLICATE_RADIUS px of point j (near_any's test)."""
+    dx, dy = x[:, None] - px, y[:, None] - py
+    return dx * dx + dy * dy < DUPLICATE_RADIUS * DUPLICATE_RADIUS
+
+
 def near_any_of(points: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """:func:`near_any` for each of the positions (x[k], y[k]) at once (bool array)."""
     if not points or not len(x):
         return np.zeros(len(x), bool)
     p = np.asarray(points, np.float64)
-    dx, dy = x[:, None] - p[:, 0], y[:, None] - p[:, 1]
-    return (dx * dx + dy * dy < DUPLICATE_RADIUS * DUPLICATE_RADIUS).any(axis=1)
+    return within_duplicate_radius(x, y, p[:, 0], p[:, 1]).any(axis=1)
 
 
 def resize_population(n: int, size: int, u: np.ndarray) -> np.ndarray:
@@ -568,9 +573,8 @@ class SGDSPF:
         if len(self.active) < 2:
             return
         tracks = sorted(self.active, key=lambda t: t.track_id)
-        xy = np.array([t.last_xy() for t in tracks])
-        dx, dy = xy[:, None, 0] - xy[None, :, 0], xy[:, None, 1] - xy[None, :, 1]
-        close = np.triu(dx * dx + dy * dy < DUPLICATE_RADIUS * DUPLICATE_RADIUS, 1)  # near_any's test
+        x, y = np.array([t.last_xy() for t in tracks]).T
+        close = np.triu(within_duplicate_radius(x, y, x, y), 1)
         if not close.any():
             return
         alive = np.ones(len(tracks), bool)
