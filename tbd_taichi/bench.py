@@ -25,7 +25,13 @@ from different machines differ by 2× and more (docs/results/bench_machines.md),
 where it was measured.
 
 ``runs`` > 1 repeats each engine's run, the engines in turn and in alternating order; the medians pool all
-runs' frames, and each run's median update time and NumPy/Taichi ratio are listed too.
+runs' frames, and each run's median update time and NumPy/Taichi ratio are listed too.  ``paired=True``
+(``--paired``) has the engines take the frames in turn within each run, frame by frame, so that a slow spell
+of the machine, however short, slows both: the ratio then holds from run to run.
+
+On the CPU backend each engine also reports ``kernels_ms``, the median time in kernel launches
+(:class:`~tbd_taichi.launch.LaunchClock`; 0 for the NumPy engine), and ``host_ms``, the median of ``update``
+less that: the Python scheduler, NumPy and OpenCV work, which both engines run.
 
 ``total`` is the sum of the stage medians (CPU work, in either process); ``update_ms`` the median
 wall time of one ``update`` call (or of the saliency step) and ``fps`` its inverse;
@@ -43,12 +49,14 @@ import numpy as np
 
 from . import backend
 from .errors import ParameterError
+from .launch import LaunchClock
 from .normalize import normalise_frame
 from .particles import ParticlePool
 from .pf import birth_intensity_range
 from .simulate import simulate
 
 WARMUP = 3
+KERNEL_PREFIX = "kernel "  # per-kernel sample names in engine_samples' results
 
 
 def _median_ms(samples: list[float]) -> float:
@@ -100,39 +108,65 @@ def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
     return step, lambda: None
 
 
-def engine_samples(frames: np.ndarray, snr: float, engine: str, particles: int = 0, groups: int = 1,
-                   pipeline: bool = True, frontend_process: bool = False) -> dict[str, list[float]]:
-    """One engine's run over raw ``frames`` (T, H, W): seconds per timed frame (after WARMUP) of each stage,
-    and of the whole step under "update"."""
-    step, close = (pipeline_stepper if pipeline else saliency_stepper)(frames.shape[1:], snr, engine,
-                                                                      frontend_process)
-    pool = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
-    samples: dict[str, list[float]] = {}
+def engine_samples(frames: np.ndarray, snr: float, engines: tuple, particles: int = 0, groups: int = 1,
+                   pipeline: bool = True, frontend_process: bool = False,
+                   kernel_time: bool = False) -> dict[str, dict[str, list[float]]]:
+    """The runs of ``engines`` over raw ``frames`` (T, H, W), frame by frame in turn (in ``engines``' order on
+    even frames, reversed on odd ones), so that a slow spell of the machine slows each alike; with one engine, its
+    run alone.  Per engine, seconds per timed frame (after WARMUP) of each stage and of the whole step
+    ("update"); with ``kernel_time`` (CPU backends) also the time in kernel launches ("kernels",
+    :class:`~tbd_taichi.launch.LaunchClock`)."""
+    stepper = pipeline_stepper if pipeline else saliency_stepper
+    steps, closers, pools = {}, [], {}
+    for engine in engines:
+        steps[engine], close = stepper(frames.shape[1:], snr, engine, frontend_process)
+        closers.append(close)
+        pools[engine] = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
+    samples: dict[str, dict[str, list[float]]] = {engine: {} for engine in engines}
     for t, frame in enumerate(frames):
-        t0 = time.perf_counter()
-        seconds = step(frame)
-        t1 = time.perf_counter()
-        if pool is not None:
-            z = normalise_frame(frame).z  # untimed: the pipeline has normalised this frame already
-            t2 = time.perf_counter()
-            pool.step(t, z)
-            seconds["particles"] = time.perf_counter() - t2
-        if t >= WARMUP:
-            for name, value in {**seconds, "update": t1 - t0}.items():
-                samples.setdefault(name, []).append(value)
-    close()  # a front-end process ends here, so its peak memory counts below
+        for engine in (engines if t % 2 == 0 else engines[::-1]):
+            with LaunchClock() as clock:
+                t0 = time.perf_counter()
+                seconds = steps[engine](frame)
+                t1 = time.perf_counter()
+            if kernel_time:
+                seconds["kernels"] = clock.seconds
+                seconds.update({KERNEL_PREFIX + name: v for name, v in clock.by_kernel.items()})
+            if pools[engine] is not None:
+                z = normalise_frame(frame).z  # untimed: the pipeline has normalised this frame already
+                t2 = time.perf_counter()
+                pools[engine].step(t, z)
+                seconds["particles"] = time.perf_counter() - t2
+            if t >= WARMUP:
+                for name, value in {**seconds, "update": t1 - t0}.items():
+                    samples[engine].setdefault(name, []).append(value)
+    for close in closers:
+        close()  # a front-end process ends here, so its peak memory counts below
     return samples
 
 
 def engine_summary(runs: list[dict[str, list[float]]]) -> dict:
-    """Per-stage median ms/frame over the timed frames of all ``runs`` (``engine_samples`` results), their sum,
-    the median update time, fps, each run's median update time and the process's peak memory now."""
-    pooled = {name: [v for run in runs for v in run[name]] for name in runs[0]}
-    medians = {name: _median_ms(v) for name, v in pooled.items() if name != "update"}
+    """Per-stage median ms/frame over the timed frames of all ``runs`` (``engine_samples`` results of one
+    engine), their sum, the median update time, fps, each run's median update time and the process's peak memory
+    now; with kernel times, the median ms in kernel launches ("kernels_ms") and outside them ("host_ms": the
+    Python, NumPy and OpenCV work of ``update``), and per kernel ("kernel_ms", largest first: the median over
+    the frames in which the kernel ran)."""
+    names = dict.fromkeys(name for run in runs for name in run)  # a kernel may run in some runs only
+    pooled = {name: [v for run in runs for v in run.get(name, [])] for name in names}
+    medians = {name: _median_ms(v) for name, v in pooled.items()
+               if name not in ("update", "kernels") and not name.startswith(KERNEL_PREFIX)}
     update_ms = _median_ms(pooled["update"])
-    return {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
-            "fps": 1e3 / update_ms, "run_update_ms": [_median_ms(run["update"]) for run in runs],
-            "peak_rss_mib": peak_rss_mib()}
+    summary = {"stages": medians, "total": float(sum(medians.values())), "update_ms": update_ms,
+               "fps": 1e3 / update_ms, "run_update_ms": [_median_ms(run["update"]) for run in runs],
+               "peak_rss_mib": peak_rss_mib()}
+    if "kernels" in pooled:
+        kernels = np.array(pooled["kernels"])
+        summary["kernels_ms"] = _median_ms(kernels)
+        summary["host_ms"] = _median_ms(np.array(pooled["update"]) - kernels)
+        per_kernel = {name[len(KERNEL_PREFIX):]: _median_ms(v) for name, v in pooled.items()
+                      if name.startswith(KERNEL_PREFIX)}
+        summary["kernel_ms"] = dict(sorted(per_kernel.items(), key=lambda kv: -kv[1]))
+    return summary
 
 
 @functools.lru_cache(maxsize=1)
@@ -167,12 +201,15 @@ def peak_rss_mib() -> float:
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
-              frontend_process: bool = False, runs: int = 1) -> dict:
+              frontend_process: bool = False, runs: int = 1, paired: bool = False) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
     ``frontend_process``: the trackers run normalisation and saliency in a second process.  ``runs`` > 1
     repeats the engines' runs, in turn and in alternating order (taichi, numpy, numpy, taichi, …), so that a
     VM's slow spells (10–50 % for minutes) fall on both; the medians pool every run's frames, and
-    ``run_update_ms`` lists each run's median update time (``run_ratios``: NumPy over Taichi, run by run)."""
+    ``run_update_ms`` lists each run's median update time (``run_ratios``: NumPy over Taichi, run by run).
+    ``paired``: in each run the engines take the frames in turn, frame by frame (their trackers side by side in
+    memory), so that even a short slow spell falls on both.  On the CPU backend each engine also reports the
+    median time in kernel launches and outside them (``kernels_ms``, ``host_ms``)."""
     if runs < 1:
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
     backend.keep_freed_memory()
@@ -180,12 +217,16 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
     result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
-              "frontend_process": bool(frontend_process and pipeline), "runs": runs, "machine": machine_description(),
-              "versions": software_versions(), "engines": {}}
+              "frontend_process": bool(frontend_process and pipeline), "runs": runs, "paired": bool(paired),
+              "machine": machine_description(), "versions": software_versions(), "engines": {}}
+    engines = tuple(engines)
     samples: dict[str, list] = {engine: [] for engine in engines}
     for r in range(runs):
-        for engine in (engines if r % 2 == 0 else engines[::-1]):
-            samples[engine].append(engine_samples(frames, snr, engine, particles, groups, pipeline, frontend_process))
+        order = engines if r % 2 == 0 else engines[::-1]
+        for together in ([order] if paired else [(engine,) for engine in order]):
+            for engine, run in engine_samples(frames, snr, together, particles, groups, pipeline, frontend_process,
+                                              kernel_time=cfg.arch == "cpu").items():
+                samples[engine].append(run)
     for engine in engines:
         result["engines"][engine] = engine_summary(samples[engine])
     if "taichi" in samples and "numpy" in samples:
@@ -205,13 +246,15 @@ def format_table(result: dict) -> str:
     pool = f", {result['particles']} particles in {result['groups']} group(s)" if result.get("particles") else ""
     front = ", front end in a second process" if result.get("frontend_process") else ""
     front += f", {result['runs']} runs each" if result.get("runs", 1) > 1 else ""
+    front += ", engines frame by frame in turn" if result.get("paired") and len(names) > 1 else ""
     lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
              f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}",
              f"on {result.get('machine', 'an unrecorded machine')}", head]
-    for stage in stages + ["update", "fps", "peak MiB"]:
+    split = ["kernels", "host"] if all("kernels_ms" in engines[n] for n in names) else []
+    for stage in stages + ["update"] + split + ["fps", "peak MiB"]:
         vals = {n: _row_value(engines[n], stage) for n in names}
         row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)
-        if ratio and stage not in ("fps", "peak MiB"):
+        if ratio and stage not in ("fps", "peak MiB", "kernels", "host"):
             row += f"{vals['numpy'] / vals['taichi']:>13.1f}x"
         lines.append(row)
     if result.get("runs", 1) > 1:
@@ -219,9 +262,14 @@ def format_table(result: dict) -> str:
             lines.append(f"{n} update per run: " + ", ".join(f"{v:.2f}" for v in engines[n]["run_update_ms"]) + " ms")
         if "run_ratios" in result:
             lines.append("numpy/taichi per run: " + ", ".join(f"{v:.1f}x" for v in result["run_ratios"]))
+    kernel_ms = engines.get("taichi", {}).get("kernel_ms")
+    if kernel_ms:
+        lines.append("taichi kernels, ms in the frames each ran: "
+                     + ", ".join(f"{name} {v:.2f}" for name, v in kernel_ms.items() if v >= 0.01))
     return "\n".join(lines)
 
 
 def _row_value(engine: dict, stage: str) -> float:
-    extra = {"total": "total", "update": "update_ms", "fps": "fps", "peak MiB": "peak_rss_mib"}
+    extra = {"total": "total", "update": "update_ms", "fps": "fps", "peak MiB": "peak_rss_mib", "kernels": "kernels_ms",
+             "host": "host_ms"}
     return engine[extra[stage]] if stage in extra else engine["stages"][stage]

@@ -145,7 +145,7 @@ def cmd_bench(args) -> int:
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
-                       frontend_process=args.frontend_process, runs=args.runs)
+                       frontend_process=args.frontend_process, runs=args.runs, paired=args.paired)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -298,6 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--runs", type=int, default=1,
                     help="runs per engine, taken in turn in alternating order so that a VM's slow spells fall on "
                          "both; medians over all runs' frames, and each run's update time and ratio (default 1)")
+    be.add_argument("--paired", action="store_true",
+                    help="the engines take the frames in turn within each run, frame by frame, so that even a short "
+                         "slow spell of the machine slows both")
     be.add_argument("--particles", type=int, default=0,
                     help="also time one particle-filter step of a pool this large (stage 'particles'; default 0: off)")
     be.add_argument("--groups", type=int, default=1, help="filters the pool is split into (default 1)")

@@ -20,6 +20,8 @@ backends keep Taichi's own launch.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import taichi as ti
 from taichi.lang import impl
@@ -33,6 +35,7 @@ INTS = (int, np.integer)
 FLOATS = (float, int, np.floating, np.integer)
 MAX_SIGNATURES = 16  # compiled signatures kept per kernel (a caller passing fresh objects as templates adds one per call)
 LEAN_ARCHS = (ti.x64, ti.arm64)  # the CPU backends; GPU backends launch through Taichi (module notes)
+LAUNCH_CLOCKS: list = []  # the active LaunchClock objects
 
 
 def argument_kinds(kernel, skip: int) -> tuple:
@@ -103,6 +106,17 @@ class FastKernel:
         self.compiled = {}  # signature key → (program, kernel's C++ object, compiled data, template args kept alive)
 
     def __call__(self, *args, **kwargs):
+        if not LAUNCH_CLOCKS:
+            return self._launch(args, kwargs)
+        t0 = time.perf_counter()
+        try:
+            return self._launch(args, kwargs)
+        finally:
+            elapsed = time.perf_counter() - t0
+            for clock in LAUNCH_CLOCKS:
+                clock.add(self.kernel.func.__name__, elapsed)
+
+    def _launch(self, args: tuple, kwargs: dict):
         key, values = (None, None) if kwargs or self.kinds is None else lean_arguments(self.kinds, args)
         runtime = impl.get_runtime()
         entry = self.compiled.get(key) if key is not None else None
@@ -144,6 +158,28 @@ class FastKernel:
         config = runtime.prog.config()
         return (not self.kernel.has_print and config.arch in LEAN_ARCHS and not config.debug
                 and len(self.compiled) < MAX_SIGNATURES)
+
+
+class LaunchClock:
+    """Wall seconds spent in :class:`FastKernel` launches while active
+    (``with LaunchClock() as clock: …``, then ``clock.seconds``, and per kernel name ``clock.by_kernel``).
+    On the CPU backends a launch returns when its kernel has run, so this is the kernels' time as the host
+    sees it, launch costs included; on a GPU, launches are asynchronous and this is not the kernels' time."""
+
+    def __init__(self):
+        self.seconds = 0.0
+        self.by_kernel: dict[str, float] = {}
+
+    def add(self, kernel: str, seconds: float) -> None:
+        self.seconds += seconds
+        self.by_kernel[kernel] = self.by_kernel.get(kernel, 0.0) + seconds
+
+    def __enter__(self) -> "LaunchClock":
+        LAUNCH_CLOCKS.append(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        LAUNCH_CLOCKS.remove(self)
 
 
 class Launcher:

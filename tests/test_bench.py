@@ -3,6 +3,7 @@ import json
 
 import pytest
 
+from tbd_taichi import bench
 from tbd_taichi.bench import format_table, run_bench
 from tbd_taichi.sgds import PIPELINE_STAGES
 
@@ -41,3 +42,41 @@ def test_runs_alternate_the_engines_and_report_each_run():
     assert "2 runs each" in table and "numpy/taichi per run: " in table
     with pytest.raises(ValueError, match="runs must be"):
         run_bench((64, 64), runs=0)
+
+
+def test_paired_runs_give_the_engines_each_frame_in_turn(monkeypatch):
+    """--paired: within a run both trackers exist and take every frame in turn, the order reversed from one frame to
+    the next and from one run to the next; without it, one engine's whole run, then the other's."""
+    calls = []
+
+    def recording_stepper(shape, snr, engine, frontend_process=False):
+        def step(frame):
+            calls.append(engine)
+            return {"normalise": 1e-3}
+        return step, lambda: None
+
+    monkeypatch.setattr(bench, "pipeline_stepper", recording_stepper)
+    n = 3 + bench.WARMUP
+    result = run_bench((32, 32), snr=3.0, n_frames=3, runs=2, paired=True)
+    run_1 = ["taichi", "numpy", "numpy", "taichi"] * (n // 2)  # n is even: frames 0, 1 | 2, 3 | …
+    run_2 = ["numpy", "taichi", "taichi", "numpy"] * (n // 2)
+    assert n % 2 == 0 and calls == run_1 + run_2 and result["paired"]
+    assert result["engines"]["taichi"]["run_update_ms"] and len(result["engines"]["numpy"]["run_update_ms"]) == 2
+    calls.clear()
+    run_bench((32, 32), snr=3.0, n_frames=3, runs=2)
+    assert calls == ["taichi"] * n + ["numpy"] * n + ["numpy"] * n + ["taichi"] * n
+
+
+@pytest.mark.slow
+def test_cpu_results_split_update_into_kernel_launches_and_host_work():
+    """kernels_ms: the median time in kernel launches (none for the NumPy engine), kernel_ms per kernel; host_ms:
+    the rest of update.  Both in the table, without a ratio (NumPy's host work is its whole update)."""
+    result = run_bench((64, 64), snr=3.0, n_frames=4, paired=True)
+    taichi, numpy = result["engines"]["taichi"], result["engines"]["numpy"]
+    assert numpy["kernels_ms"] == 0 and numpy["host_ms"] == pytest.approx(numpy["update_ms"]) and not numpy["kernel_ms"]
+    assert {"frame_to_first_layer", "second_layer_and_lef"} <= set(taichi["kernel_ms"])  # the saliency launches
+    assert all(v > 0 for v in taichi["kernel_ms"].values())
+    assert 0 < taichi["kernels_ms"] < max(taichi["run_update_ms"]) * 2 and 0 < taichi["host_ms"] < taichi["update_ms"]
+    rows = {line.split()[0]: line.split() for line in format_table(result).splitlines()[3:]}
+    assert len(rows["kernels"]) == len(rows["host"]) == 3 and rows["update"][-1].endswith("x")
+    assert "engines frame by frame in turn" in format_table(result)

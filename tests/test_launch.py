@@ -1,5 +1,6 @@
 """The lean kernel launch (tbd_taichi.launch): the same results as Taichi's own launch for every
 argument kind, Taichi's path for what it does not handle, and recompilation after a restart."""
+import time
 import types
 
 import numpy as np
@@ -231,3 +232,30 @@ def test_fields_made_between_lean_launches_are_materialised():
     late.from_numpy(src)
     np.testing.assert_array_equal(late.to_numpy(), src)
     np.testing.assert_array_equal(dst, 2 * src)
+
+
+def test_launch_clock_adds_the_time_of_launches_made_while_it_is_active(monkeypatch):
+    """Every active clock gets each launch's wall time (nested clocks both); none outside a clock, and a clock ends
+    even when its block raises.  The launch is slowed by a known 20 ms so that the sums are checkable."""
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    src, dst = np.arange(5, dtype=np.float32), np.zeros(5, np.float32)
+    kernels.add_into(src, dst)  # compiled outside the clocks
+    original = launch.FastKernel._launch
+
+    def slow(self, args, kwargs):
+        time.sleep(0.02)
+        return original(self, args, kwargs)
+
+    monkeypatch.setattr(launch.FastKernel, "_launch", slow)
+    with launch.LaunchClock() as outer:
+        kernels.add_into(src, dst)
+        with launch.LaunchClock() as inner:
+            kernels.add_into(src, dst)
+        time.sleep(0.05)  # host time: counted by neither
+    kernels.add_into(src, dst)  # after the clocks: counted by neither
+    assert 0.02 <= inner.seconds < 0.04 and 0.04 <= outer.seconds < 0.07
+    np.testing.assert_array_equal(dst, 4 * src)
+    with pytest.raises(RuntimeError):
+        with launch.LaunchClock():
+            raise RuntimeError("stop")
+    assert launch.LAUNCH_CLOCKS == []
