@@ -167,11 +167,13 @@ class LaunchClock:
     sees it, launch costs included; on a GPU, launches are asynchronous and this is not the kernels' time."""
 
     def __init__(self):
-        self.seconds = 0.0
         self.by_kernel: dict[str, float] = {}
 
+    @property
+    def seconds(self) -> float:
+        return sum(self.by_kernel.values())
+
     def add(self, kernel: str, seconds: float) -> None:
-        self.seconds += seconds
         self.by_kernel[kernel] = self.by_kernel.get(kernel, 0.0) + seconds
 
     def __enter__(self) -> "LaunchClock":
