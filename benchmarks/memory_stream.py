@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import tbd_taichi
-from tbd_taichi.sgds import SGDSPF
+from tbd_taichi.methods.sgds import SGDSPF
 from tbd_taichi.simulate import intensity_for_snr, render_psf
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "results" / "memory_stream.md"

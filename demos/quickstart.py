@@ -21,7 +21,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import tbd_taichi as tbd  # noqa: E402
-from tbd_taichi.pf import OriginalPF  # noqa: E402
+from tbd_taichi.methods.pf import OriginalPF  # noqa: E402
 
 
 def brightest_box_detector(frames: np.ndarray) -> np.ndarray:

@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from . import backend
+from .engines import kernel_module
 from .errors import ParameterError
 from .io import stream_frame
 from .normalize import mean_background, normalise_frame, robust_sigma
@@ -75,16 +76,11 @@ class Preprocessor:
     def __init__(self, shape, background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, engine: str = "taichi"):
         if background not in BACKGROUNDS:
             raise ParameterError(f"unknown background {background!r}; choose one of {', '.join(BACKGROUNDS)}")
+        k = kernel_module(engine, "background")
         if engine == "taichi":
-            backend.ensure_init()
-            from .kernels import background as kernels
             from .launch import Launcher
 
-            k = Launcher(kernels)
-        elif engine == "numpy":
-            from .numpy_kernels import background as k
-        else:
-            raise ParameterError(f"engine must be 'taichi' or 'numpy', got {engine!r}")
+            k = Launcher(k)
         self.k, self.shape = k, (int(shape[0]), int(shape[1]))
         self.serial = engine == "taichi" and backend.serial_loops(self.shape[0] * self.shape[1])
         self.background, self.bad_pixels = background, bool(bad_pixels)

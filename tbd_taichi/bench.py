@@ -1,8 +1,8 @@
 """``tbd-taichi bench``: median ms/frame per stage, Taichi against NumPy in the same run.
 
-The whole SGDS-PF pipeline runs through the public API, one :meth:`SGDSPF.update` per frame
-with the Table 2 preset of ``snr``, on a simulated sequence of that SNR.  Stages (each timed
-per frame after a warm-up, median over the timed frames):
+A method's whole pipeline (``method``, any registered one; default SGDS-PF) runs through the public API, one
+``update`` per frame with the preset of ``snr``, on a simulated sequence of that SNR.  Stages are the tracker's
+``timings`` (each timed per frame after a warm-up, median over the timed frames); SGDS-PF's:
 
 * ``normalise``: z = (frame − median)/(1.4826·MAD) on the host;
 * ``saliency``: the whole multi-frame saliency stage (Eqs. 20–33), from z to the
@@ -53,7 +53,7 @@ from .errors import ParameterError
 from .launch import LaunchClock
 from .normalize import normalise_frame
 from .particles import ParticlePool
-from .pf import birth_intensity_range
+from .methods.pf import birth_intensity_range
 from .simulate import simulate
 
 WARMUP = 3
@@ -79,23 +79,30 @@ def benchmark_pool(shape, particles: int, groups: int, engine: str, snr: float, 
     return pool
 
 
-def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = False):
-    """One SGDSPF.update per call, which returns the seconds each pipeline stage took; and a function
-    that stops the tracker's front-end process (if any)."""
-    from .sgds import SGDSPF
+def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds"):
+    """One ``update`` of method ``method``'s tracker per call, which returns the seconds each of its stages
+    (``timings``) took; and a function that releases the tracker (SGDS-PF's front-end process, if any)."""
+    from . import methods
 
-    tracker = SGDSPF(shape, snr=snr, engine=engine, history=False, frontend_process=frontend_process)
+    spec = methods.get(method)
+    options = {"history": False} if "history" in spec.options else {}
+    if frontend_process:
+        if "frontend_process" not in spec.options:
+            raise ParameterError(f"--frontend-process applies to sgds only, not to {method}")
+        options["frontend_process"] = True
+    tracker = methods.make_tracker(method, shape, snr=snr, engine=engine, **options)
 
     def step(frame: np.ndarray) -> dict[str, float]:
-        before = dict(tracker.stage_seconds)
+        before = tracker.timings
         tracker.update(frame)
-        return {name: tracker.stage_seconds[name] - before[name] for name in before}
-    return step, tracker.front.close
+        after = tracker.timings
+        return {name: after[name] - before[name] for name in before}
+    return step, getattr(tracker, "close", lambda: None)
 
 
-def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = False):
-    """Normalisation and the saliency stage only (no particle filters; ``frontend_process`` unused)."""
-    from .params import SGDSParams
+def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds"):
+    """Normalisation and the saliency stage only (no particle filters; ``frontend_process``, ``method`` unused)."""
+    from .methods.sgds.params import SGDSParams
     from .saliency import SaliencyExtractor
 
     ext = SaliencyExtractor(shape, snr=snr, block_size=SGDSParams.for_snr(snr).L_ib, engine=engine, details=False)
@@ -111,7 +118,7 @@ def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
 
 def engine_samples(frames: np.ndarray, snr: float, engines: tuple, particles: int = 0, groups: int = 1,
                    pipeline: bool = True, frontend_process: bool = False,
-                   kernel_time: bool = False) -> dict[str, dict[str, list[float]]]:
+                   kernel_time: bool = False, method: str = "sgds") -> dict[str, dict[str, list[float]]]:
     """The runs of ``engines`` over raw ``frames`` (T, H, W), frame by frame in turn (in ``engines``' order on
     even frames, reversed on odd ones), so that a slow spell of the machine slows each alike; with one engine, its
     run alone.  Per engine, seconds per timed frame (after WARMUP) of each stage and of the whole step
@@ -120,7 +127,7 @@ def engine_samples(frames: np.ndarray, snr: float, engines: tuple, particles: in
     stepper = pipeline_stepper if pipeline else saliency_stepper
     steps, closers, pools = {}, [], {}
     for engine in engines:
-        steps[engine], close = stepper(frames.shape[1:], snr, engine, frontend_process)
+        steps[engine], close = stepper(frames.shape[1:], snr, engine, frontend_process, method)
         closers.append(close)
         pools[engine] = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
     samples: dict[str, dict[str, list[float]]] = {engine: {} for engine in engines}
@@ -202,8 +209,9 @@ def peak_rss_mib() -> float:
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
-              frontend_process: bool = False, runs: int = 1, paired: bool = False) -> dict:
+              frontend_process: bool = False, runs: int = 1, paired: bool = False, method: str = "sgds") -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
+    ``method``: the registered method whose tracker is timed (``pipeline``).
     ``frontend_process``: the trackers run normalisation and saliency in a second process.  ``runs`` > 1
     repeats the engines' runs, in turn and in alternating order (taichi, numpy, numpy, taichi, …), so that a
     VM's slow spells (10–50 % for minutes) fall on both; the medians pool every run's frames, and
@@ -213,10 +221,13 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     median time in kernel launches and outside them (``kernels_ms``, ``host_ms``)."""
     if runs < 1:
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
+    from . import methods
+
+    methods.get(method)  # an unknown method fails here, before the sequence is simulated
     backend.keep_freed_memory()
     cfg = backend.init(arch)
     frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
-    result = {"shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
+    result = {"method": method, "shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
               "frontend_process": bool(frontend_process and pipeline), "runs": runs, "paired": bool(paired),
               "machine": machine_description(), "versions": software_versions(), "engines": {}}
@@ -226,7 +237,7 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
         order = engines if r % 2 == 0 else engines[::-1]
         for together in ([order] if paired else [(engine,) for engine in order]):
             for engine, run in engine_samples(frames, snr, together, particles, groups, pipeline, frontend_process,
-                                              kernel_time=cfg.arch == "cpu").items():
+                                              kernel_time=cfg.arch == "cpu", method=method).items():
                 samples[engine].append(run)
     for engine in engines:
         result["engines"][engine] = engine_summary(samples[engine])
@@ -248,7 +259,7 @@ def format_table(result: dict) -> str:
     front = ", front end in a second process" if result.get("frontend_process") else ""
     front += f", {result['runs']} runs each" if result.get("runs", 1) > 1 else ""
     front += ", engines frame by frame in turn" if result.get("paired") and len(names) > 1 else ""
-    lines = [f"shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
+    lines = [f"{result.get('method', 'sgds')}: shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
              f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}",
              f"on {result.get('machine', 'an unrecorded machine')}", head]
     split = ["kernels", "host"] if all("kernels_ms" in engines[n] for n in names) else []

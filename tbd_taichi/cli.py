@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, metrics, tables
-from .background import BACKGROUNDS, DEFAULT_BACKGROUND, REAL_VIDEO
+from . import backend, methods, metrics, tables
+from .background import BACKGROUNDS, REAL_VIDEO
 from .errors import TBDError
-from .params import PAPER_SALIENCY, SGDSParams
+from .methods.sgds.params import PAPER_SALIENCY
 from .progress import progress_bar
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
@@ -71,39 +71,89 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
-def cmd_track(args) -> int:
-    from . import io
-    from .sgds import MIN_FRAMES, make_tracker
+FLAG_NAMES = {"snr": "--snr", "particles": "--particles", "threshold": "--threshold", "min_peak_z": "--min-peak-z"}
 
-    source = io.open_frames(args.input)
-    preset = REAL_VIDEO if args.real_video else \
-        dict(background=DEFAULT_BACKGROUND, snr=SGDSParams.snr, min_peak_z=SGDSParams.min_peak_z)
-    chosen = {name: getattr(args, name) if getattr(args, name) is not None else value for name, value in preset.items()}
-    if args.method == "pf":
-        method_only = dict(n_particles=args.particles, threshold=args.threshold)
-        chosen.pop("min_peak_z")
-    else:
-        method_only = {}
-    stream = args.method == "sgds" and args.paths == "online"  # rows go to the CSV as they come: constant memory
-    if stream:
-        method_only["history"] = False
+
+def parse_init_box(text: str | None):
+    """``--init-box X,Y,W,H`` as four floats (checked against the method and frame by the registry)."""
+    if text is None:
+        return None
+    parts = [p for p in text.split(",")]
+    try:
+        box = tuple(float(p) for p in parts)
+    except ValueError:
+        box = ()
+    if len(box) != 4:
+        raise TBDError(f"--init-box takes X,Y,W,H (four numbers, 0-based, x = column of the left edge), got {text!r}")
+    return box
+
+
+def method_settings(args, spec) -> dict:
+    """The method's parameters and run options from the track flags: the --real-video preset (keys the
+    method declares), the method flags (``spec.aliases``), --param, and the sgds-only switches.  A flag the
+    method does not take is an error naming the methods that do."""
+    from . import methods
+
+    declared = {p.name for p in spec.param_infos()} | set(spec.options)
+    chosen = {k: v for k, v in REAL_VIDEO.items() if k in declared} if args.real_video else {}
+    flagged = {}
+    for dest, flag in FLAG_NAMES.items():
+        value = getattr(args, dest)
+        if value is None:
+            continue
+        if dest not in spec.aliases:
+            takers = [s.name for s in methods.specs() if dest in s.aliases]
+            raise TBDError(f"{flag} applies to --method {' or '.join(takers)}, not {spec.name} "
+                           f"(see --method {spec.name} --help-params)")
+        flagged[spec.aliases[dest]] = value
+    given = spec.parse_assignments(args.param)
+    clash = sorted(k for k in given if k in flagged and flagged[k] != given[k])
+    if clash:
+        raise TBDError(f"--param {clash[0]}={given[clash[0]]} contradicts the flag that sets {clash[0]} to "
+                       f"{flagged[clash[0]]}; give it once")
+    chosen.update(flagged)
+    chosen.update(given)
+    if args.background is not None:
+        chosen["background"] = args.background
+    switches = {"--paths online": args.paths == "online", "--frontend-process": args.frontend_process,
+                "--paper-saliency": args.paper_saliency}
+    needs = {"--paths online": "history", "--frontend-process": "frontend_process", "--paper-saliency": "lef_memory"}
+    for flag, on in switches.items():
+        if on and needs[flag] not in declared:
+            raise TBDError(f"{flag} applies to --method sgds only")
+    if args.paths == "online":
+        chosen["history"] = False  # rows go to the CSV as they come: constant memory
     if args.frontend_process:
-        if args.method != "sgds":
-            raise TBDError("--frontend-process applies to --method sgds only")
-        method_only["frontend_process"] = True
+        chosen["frontend_process"] = True
     if args.paper_saliency:
-        if args.method != "sgds":
-            raise TBDError("--paper-saliency applies to --method sgds only")
-        method_only.update(PAPER_SALIENCY)
-    tracker = make_tracker(args.method, source.shape, seed=args.seed, engine=args.engine,
-                           bad_pixels=not args.no_bad_pixels, **chosen, **method_only)
+        chosen.update(PAPER_SALIENCY)
+    if "bad_pixels" in declared:
+        chosen["bad_pixels"] = not args.no_bad_pixels
+    return chosen
+
+
+def cmd_track(args) -> int:
+    from . import io, methods
+
+    spec = methods.get(args.method)
+    if args.help_params:
+        print(spec.help_text())
+        return 0
+    if args.input is None or args.out is None:
+        raise TBDError("track needs INPUT and --out (or --help-params)")
+    settings = method_settings(args, spec)
+    init_box = parse_init_box(args.init_box)
+    stream = settings.get("history") is False
+    source = io.open_frames(args.input)
+    tracker = methods.make_tracker(args.method, source.shape, seed=args.seed, engine=args.engine, init_box=init_box,
+                                   **settings)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     max_projection = None
     with progress_bar("tracking", args.progress, transient=True) as bar, \
             tables.CsvTableWriter(out, tables.TRACK_COLUMNS) as writer:
         task = bar.add_task("frames", total=source.n_frames) if bar else None
-        for frame in io.iter_frames(source, min_frames=MIN_FRAMES):
+        for frame in io.iter_frames(source, min_frames=spec.min_frames):
             rows = tracker.update(frame)
             if stream:
                 writer.write(rows)
@@ -134,6 +184,17 @@ def cmd_track(args) -> int:
     return 0
 
 
+def cmd_methods(args) -> int:
+    """The registered methods: name, kind, paper and what each does."""
+    rows = [("method", "kind", "paper", "what it does")]
+    rows += [(spec.name, spec.kind, spec.paper, f"{spec.title}: {spec.description}") for spec in methods.specs()]
+    widths = [max(len(r[k]) for r in rows) for k in range(3)]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r[:3], widths)) + "  " + r[3])
+    print("\nParameters of one method: tbd-taichi track --method NAME --help-params")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from .bench import format_table, run_bench
 
@@ -145,7 +206,8 @@ def cmd_bench(args) -> int:
         raise TBDError("--particles must be ≥ 0 and, if > 0, at least --groups (≥ 1)")
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=engines, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
-                       frontend_process=args.frontend_process, runs=args.runs, paired=args.paired)
+                       frontend_process=args.frontend_process, runs=args.runs, paired=args.paired,
+                       method=args.method)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -165,9 +227,9 @@ def cmd_evaluate_suite(args) -> int:
 
     from . import suite
 
-    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    if not methods or set(methods) - set(suite.METHODS):
-        raise TBDError(f"--methods takes a comma list of {','.join(suite.METHODS)}, got {args.methods!r}")
+    chosen = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    if not chosen or set(chosen) - set(methods.names()):
+        raise TBDError(f"--methods takes a comma list of {','.join(methods.names())}, got {args.methods!r}")
     if args.tests < 1 or (args.workers is not None and args.workers < 1):
         raise TBDError("--tests and --workers must be ≥ 1")
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
@@ -175,20 +237,26 @@ def cmd_evaluate_suite(args) -> int:
     tests = suite.QUICK["tests"] if args.quick and args.tests == 100 else args.tests
     if args.tracker_snr is not None and args.tracker_snr <= 0:
         raise TBDError(f"--tracker-snr must be > 0, got {args.tracker_snr}")
-    runs = suite.plan(snrs, sizes, methods, tests, args.seed, args.tracker_snr or 0.0)
+    runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
     out_dir = Path(args.out_dir)
     workers = args.workers or os.cpu_count() or 1
-    print(f"{len(runs)} runs ({len(methods)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
+    print(f"{len(runs)} runs ({len(chosen)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
           f"{workers} worker(s) -> {out_dir}")
     results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
                                        progress=not args.no_progress)
     command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
-               f"--size {args.size} --methods {','.join(methods)} --seed {args.seed} "
+               f"--size {args.size} --methods {','.join(chosen)} --seed {args.seed} "
                + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "") + f"--out-dir {out_dir}")
     report = suite.write_report(results, out_dir, command, completed, len(runs))
     print(suite.markdown_table(suite.summarise(results)))
     print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))
     return 0 if completed else 130
+
+
+def suite_defaults() -> tuple:
+    from .suite import DEFAULT_METHODS
+
+    return DEFAULT_METHODS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -227,19 +295,25 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("track", help="detect and track dim targets in a sequence",
                         description="Run a track-before-detect filter over INPUT and write the tracks CSV "
                                     "(frame,track_id,x,y,vx,vy,intensity,confidence; x = column, y = row, 0-based).")
-    tr.add_argument("input", metavar="INPUT", help="a .npy/.npz file, a video, or a folder of PNG/TIFF/BMP images")
-    tr.add_argument("--method", choices=("sgds", "pf"), default="sgds",
-                    help="sgds: the saliency-guided double-stage PF (default); pf: the original single-target PF-TBD "
-                         "(Ristic et al.; SGDS-PF's baseline)")
+    tr.add_argument("input", metavar="INPUT", nargs="?", help="a .npy/.npz file, a video, or a folder of PNG/TIFF/BMP images")
+    tr.add_argument("--method", choices=methods.names(), default="sgds",
+                    help="the tracking method (default sgds); `tbd-taichi methods` lists them")
+    tr.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="set any parameter of the method (repeatable); --help-params lists them")
+    tr.add_argument("--help-params", action="store_true",
+                    help="print the method's parameters (default, unit, valid range, paper symbol) and exit")
+    tr.add_argument("--init-box", default=None, metavar="X,Y,W,H",
+                    help="the target's first-frame box, for methods that need one: left column X, top row Y, width, "
+                         "height (px, 0-based, pixel centres at integers)")
     tr.add_argument("--snr", type=float, default=None, help="the lowest target SNR to detect (default 1.4; 5 with --real-video)")
     tr.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same file (default 0)")
     tr.add_argument("--engine", choices=("taichi", "numpy"), default="taichi", help="kernel engine (default taichi)")
     tr.add_argument("--particles", type=int, default=None,
                     help="pf only: particle count (default: the SGDS-PF paper's Table 3 for the image size and SNR)")
-    tr.add_argument("--threshold", type=float, default=0.5,
+    tr.add_argument("--threshold", type=float, default=None,
                     help="pf only: existence probability above which a target is declared (default 0.5)")
-    tr.add_argument("--out", required=True, help="output tracks CSV")
-    tr.add_argument("--paths", choices=("whole", "online"), default="whole",
+    tr.add_argument("--out", default=None, help="output tracks CSV (required)")
+    tr.add_argument("--paths", choices=("whole", "online"), default=None,
                     help="sgds: whole = each confirmed track's whole path, from before its confirmation (default); "
                          "online = the rows as output online, from confirmation on")
     tr.add_argument("--truth", default=None, help="truth CSV (frame,target_id,x,y,...): print DSR, EDT, false tracks, OSPA")
@@ -266,6 +340,11 @@ def build_parser() -> argparse.ArgumentParser:
     _common(tr)
     tr.set_defaults(func=cmd_track)
 
+    me = sub.add_parser("methods", help="list the tracking methods", description="The registered methods: name, "
+                        "kind, paper and what each does.  Parameters: tbd-taichi track --method NAME --help-params.")
+    _common(me)
+    me.set_defaults(func=cmd_methods)
+
     es = sub.add_parser("evaluate-suite", help="Monte Carlo evaluation of SGDS-PF and the original PF (paper Figs. 14-15)",
                         description="Simulate SNR x size x N test sequences, run each method, and write TSR, mean EDT, "
                                     "mean DSR, false tracks and ms/frame as a markdown table, JSON and PNG figures. "
@@ -276,7 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
     es.add_argument("--size", choices=("all", "50", "200"), default="all",
                     help="50 (50x50, 70 frames), 200 (200x200, 150 frames) or all (default)")
-    es.add_argument("--methods", default="sgds,pf", help="comma list of sgds,pf (default both)")
+    es.add_argument("--methods", default=",".join(suite_defaults()),
+                    help=f"comma list of methods, of {','.join(methods.names())} (default {','.join(suite_defaults())})")
     es.add_argument("--seed", type=int, default=0, help="test k simulates scenario seed SEED+k (default 0)")
     es.add_argument("--tracker-snr", type=float, default=None,
                     help="give every tracker this snr preset (default: the condition's SNR, as in the paper)")
@@ -290,6 +370,8 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Median milliseconds per frame for each stage of SGDSPF.update (normalise, "
                                     "saliency, searching, tracking) after a warm-up, for each engine in the same run, "
                                     "on a simulated sequence with the --snr preset; fps and peak memory.")
+    be.add_argument("--method", choices=methods.names(), default="sgds",
+                    help="the method whose tracker is timed (default sgds)")
     be.add_argument("--shape", type=int, nargs=2, metavar=("H", "W"), default=[256, 320],
                     help="frame height and width, px (default 256 320)")
     be.add_argument("--snr", type=float, default=1.4, help="SNR preset: the lowest SNR to detect (default 1.4)")

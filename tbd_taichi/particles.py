@@ -30,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import backend
+from .engines import check_engine
 from .errors import ParameterError
 
-ENGINES = ("taichi", "numpy")
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
 FLOAT_STATE, INT_STATE = ("x", "vx", "y", "vy", "inten"), ("e", "tp", "seq")
@@ -97,8 +97,7 @@ class ParticlePool:
                  q1: float = 0.001, q2: float = 0.01, psf_sigma: float = 0.7, noise_sigma: float = 1.0,
                  intensity_floor: float = 0.1, arch: str | None = None):
         caps = np.asarray(capacities, dtype=np.int64).reshape(-1)
-        if engine not in ENGINES:
-            raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        check_engine(engine)
         if caps.size == 0 or (caps < 1).any():
             raise ParameterError(f"every group needs a capacity ≥ 1, got {caps.tolist()}")
         if min(q1, q2) < 0 or psf_sigma <= 0 or noise_sigma <= 0:

@@ -29,11 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import backend
+from .engines import check_engine
 from .errors import ParameterError
 from .io import stream_frame
 from .numpy_kernels import saliency as nps
 
-ENGINES = ("taichi", "numpy")
 BEST_K = 32  # candidates with the largest Eq. 28 LEF reported per frame (ICEF's MSW skips those at tracks)
 
 
@@ -332,8 +332,7 @@ class SaliencyExtractor:
     def __init__(self, shape, snr: float = 1.4, block_size: int = 150, psf_sigma: float = 0.7,
                  engine: str = "taichi", window: int = 1, arch: str | None = None, details: bool = True,
                  lef_memory: float = 0.0, lef_scale: float = 1.0):
-        if engine not in ENGINES:
-            raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        check_engine(engine)
         if len(shape) != 2 or min(shape) < 1:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape}")
         if snr <= 0 or psf_sigma <= 0 or window < 1:

@@ -26,8 +26,7 @@ from .progress import progress_bar
 
 SNRS = (1.2, 1.4, 1.6, 1.8, 2.0)
 SIZES = ((50, 70), (200, 150))  # (side px, frames)
-METHODS = ("sgds", "pf")
-METHOD_NAMES = {"sgds": "SGDS-PF", "pf": "original PF"}
+DEFAULT_METHODS = ("sgds", "pf")  # the paper's comparison (any registered method may be given)
 QUICK = dict(snrs=(1.4, 2.0), sizes=((50, 70), (200, 150)), tests=2)
 
 
@@ -49,7 +48,7 @@ class Run:
         return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}"
 
 
-def plan(snrs=SNRS, sizes=SIZES, methods=METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0) -> list[Run]:
+def plan(snrs=SNRS, sizes=SIZES, methods=DEFAULT_METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0) -> list[Run]:
     """Every run of the suite; test k uses scenario seed ``seed + k``.  ``preset_snr`` > 0 gives
     every tracker that ``snr`` (Table 2 / Table 3 column) instead of the condition's SNR."""
     return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr)) for side, frames in sizes for snr in snrs
@@ -68,7 +67,7 @@ _WARM: set = set()  # configurations this process has compiled
 
 def run_one(run: Run) -> dict:
     """Simulate, track and score one run (a worker's job)."""
-    from .sgds import make_tracker
+    from .methods import make_tracker
     from .simulate import simulate
 
     scene = simulate((run.side, run.side), frames=run.frames, snr=run.snr, seed=run.seed)
@@ -166,7 +165,7 @@ def summarise(results: list[dict]) -> list[dict]:
     """One row per (size, SNR, method): n, TSR, mean EDT, mean DSR, false tracks/sequence, ms/frame."""
     rows = []
     keys = sorted({(r["side"], r["frames"], r["snr"], r["method"]) for r in results},
-                  key=lambda k: (k[0], k[2], METHODS.index(k[3]) if k[3] in METHODS else 9))
+                  key=lambda k: (k[0], k[2], _rank(k[3])))
     for side, frames, snr, method in keys:
         sel = [r for r in results if (r["side"], r["frames"], r["snr"], r["method"]) == (side, frames, snr, method)]
         presets = sorted({r.get("preset_snr") or r["snr"] for r in sel})
@@ -182,17 +181,28 @@ def summarise(results: list[dict]) -> list[dict]:
     return rows
 
 
-def configured_particles(method: str, side: int, preset: float) -> int:
-    """Particles the tracker is configured with: the original PF's Table 3 count, or SGDS-PF's
-    searching particles N_sump × blocks (Table 2; each potential target adds N_tpf)."""
-    from .params import SGDSParams
-    from .pf import table3_particles
-    from .saliency import block_grid
+def _rank(method: str) -> tuple:
+    """A method's place in tables: the registry's listing order (unknown names last)."""
+    from . import methods
 
-    if method == "pf":
-        return table3_particles((side, side), preset)
-    p = SGDSParams.for_snr(preset)
-    return p.N_sump * block_grid((side, side), p.L_ib).n_blocks
+    known = methods.names()
+    return (known.index(method), "") if method in known else (len(known), method)
+
+
+def method_title(method: str) -> str:
+    from . import methods
+
+    return methods.get(method).title if method in methods.names() else method
+
+
+def configured_particles(method: str, side: int, preset: float) -> int:
+    """Particles the tracker is configured with for a side × side frame at the ``preset`` SNR (the method's
+    ``particle_count``: the original PF's Table 3 count, SGDS-PF's N_sump × blocks); 0 if it does not say."""
+    from . import methods
+
+    spec = methods.get(method)
+    shape = (side, side)
+    return spec.particle_count(shape, spec.make_params(shape, snr=preset)) if spec.particle_count else 0
 
 
 def markdown_table(rows: list[dict]) -> str:
@@ -206,7 +216,7 @@ def markdown_table(rows: list[dict]) -> str:
     for r in rows:
         presets = r.get("preset") or [r["snr"]]
         particles = "/".join(f"{configured_particles(r['method'], r['side'], v):,}" for v in presets)
-        lines.append(f"| {r['side']}×{r['side']}×{r['frames']} | {r['snr']:g} | {METHOD_NAMES.get(r['method'], r['method'])} "
+        lines.append(f"| {r['side']}×{r['side']}×{r['frames']} | {r['snr']:g} | {method_title(r['method'])} "
                      f"| {'/'.join(f'{v:g}' for v in presets)} | {particles} "
                      f"| {r['n']} | {r['tsr']:.2f} | {r['edt']:.2f} | {r['dsr']:.2f} | {r['false_tracks']:.2f} "
                      f"| {r['ms_per_frame']:.1f} |"
@@ -236,13 +246,13 @@ def plot_figures(rows: list[dict], out_dir: Path) -> list[Path]:
     paths = []
     for side in sorted({r["side"] for r in rows}):
         fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
-        for method in METHODS:
+        for method in sorted({r["method"] for r in rows}, key=_rank):
             sel = sorted((r for r in rows if r["side"] == side and r["method"] == method), key=lambda r: r["snr"])
             if not sel:
                 continue
             snr = [r["snr"] for r in sel]
             for ax, col in zip(axes, ("tsr", "edt", "ms_per_frame")):
-                ax.plot(snr, [r[col] for r in sel], "o-", label=METHOD_NAMES[method])
+                ax.plot(snr, [r[col] for r in sel], "o-", label=method_title(method))
         for ax, title in zip(axes, ("(a) TSR", "(b) mean EDT (px)", "(c) time (ms/frame)")):
             ax.set_xlabel("SNR")
             ax.set_title(title)

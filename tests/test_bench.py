@@ -5,7 +5,7 @@ import pytest
 
 from tbd_taichi import bench
 from tbd_taichi.bench import format_table, run_bench
-from tbd_taichi.sgds import PIPELINE_STAGES
+from tbd_taichi.methods.sgds import PIPELINE_STAGES
 
 
 @pytest.mark.slow
@@ -49,7 +49,7 @@ def test_paired_runs_give_the_engines_each_frame_in_turn(monkeypatch):
     the next and from one run to the next; without it, one engine's whole run, then the other's."""
     calls = []
 
-    def recording_stepper(shape, snr, engine, frontend_process=False):
+    def recording_stepper(shape, snr, engine, frontend_process=False, method="sgds"):
         def step(frame):
             calls.append(engine)
             return {"normalise": 1e-3}

@@ -11,7 +11,7 @@ from tbd_taichi.background import Preprocessor
 from tbd_taichi.errors import InputError, WorkerError
 from tbd_taichi.frontend import FrontEnd, FrontEndProcess
 from tbd_taichi.saliency import SaliencyExtractor
-from tbd_taichi.sgds import SGDSPF
+from tbd_taichi.methods.sgds import SGDSPF
 
 SHAPE = (40, 52)
 OPTIONS = dict(snr=1.4, L_ib=30, psf_sigma=0.7, background="none", bad_pixels=True, engine="taichi")

@@ -2,7 +2,7 @@
 import pytest
 
 from tbd_taichi.errors import ParameterError
-from tbd_taichi.params import PAPER_SALIENCY, SGDSParams, snr_band
+from tbd_taichi.methods.sgds.params import PAPER_SALIENCY, SGDSParams, snr_band
 
 
 @pytest.mark.parametrize("snr,band,l_ib,n_sump,t_pe,t_ptp,t_ft,t_rt", [

@@ -5,7 +5,7 @@ import pytest
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.errors import InputError
-from tbd_taichi.pf import OriginalPF, table3_particles
+from tbd_taichi.methods.pf import OriginalPF, table3_particles
 
 
 def test_particle_numbers_follow_table3():

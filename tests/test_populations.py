@@ -7,7 +7,7 @@ from tbd_taichi.errors import ParameterError
 from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.particles import ParticlePool
-from tbd_taichi.sgds import eliminated_per_population, populations, slab_populations
+from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
 
 SHAPE = (19, 27)
 CAPS = [900, 40, 1300, 5]

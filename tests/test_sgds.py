@@ -8,12 +8,14 @@ import scipy.ndimage as ndi
 
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
-from tbd_taichi.params import PAPER_SALIENCY
+from tbd_taichi.methods.sgds.params import PAPER_SALIENCY
 from tbd_taichi.errors import InputError
 from tbd_taichi.frontend import FrontEnd
 from tbd_taichi.numpy_kernels.populations import spread_removal
-from tbd_taichi.sgds import (MSW_LEF_OFFSET, SGDSPF, held_compact, icef_of_log_ratio, log_weight_ratio,
-                             msw_from_candidates, resize_population, scef, update_confidence, windowed_icef)
+from tbd_taichi.methods.sgds import SGDSPF
+from tbd_taichi.methods.sgds.confirmation import (MSW_LEF_OFFSET, held_compact, icef_of_log_ratio, log_weight_ratio,
+                                                  msw_from_candidates, scef, update_confidence, windowed_icef)
+from tbd_taichi.methods.sgds.populations import resize_population
 
 
 def run(shape, frames, snr, seed, engine="taichi", **params):
@@ -453,7 +455,7 @@ def test_reused_fields_give_the_same_tracks(method):
     scene = tbd.simulate((40, 40), 30, snr=2.5, seed=6)
     tables_out = []
     for _ in range(2):
-        tracker = tbd.sgds.make_tracker(method, (40, 40), snr=2.5, seed=3)
+        tracker = tbd.make_tracker(method, (40, 40), snr=2.5, seed=3)
         for frame in scene.frames:
             tracker.update(frame)
         tables_out.append(tracker.finish())
@@ -463,7 +465,7 @@ def test_reused_fields_give_the_same_tracks(method):
 
 
 def test_peak_z_is_the_3x3_maximum_and_nan_outside():
-    from tbd_taichi.sgds import peak_z
+    from tbd_taichi.methods.sgds.confirmation import peak_z
 
     z = np.zeros((6, 7), np.float32)
     z[2, 3], z[0, 0], z[5, 6] = 4.0, 9.0, -1.0
@@ -495,7 +497,7 @@ def test_min_peak_z_reports_only_tracks_that_bright():
 def test_near_any_of_agrees_with_near_any_point_by_point(rng):
     """The vectorised duplicate test gives near_any's answer at every position, with points exactly at,
     just inside and just outside the radius, and for no points or no positions."""
-    from tbd_taichi.sgds import DUPLICATE_RADIUS, near_any, near_any_of
+    from tbd_taichi.methods.sgds.confirmation import DUPLICATE_RADIUS, near_any, near_any_of
 
     points = [(10.0, 10.0)] + [(float(x), float(y)) for x, y in rng.uniform(0, 20, (30, 2))
                                if math.hypot(x - 10, y - 10) > 2 * DUPLICATE_RADIUS][:6]
@@ -514,7 +516,7 @@ def test_near_any_of_agrees_with_near_any_point_by_point(rng):
 def test_merge_duplicates_ends_the_younger_of_close_tracks():
     """Tracks 1–2 are 1.9 px apart (2 ends), 3–4 exactly 2 px (both stay), 5–6–7 each 1.5 px from the next:
     5 ends 6, and 7 (1.5 px from the ended 6, 3 px from 5) stays; the ended tracks' groups are freed."""
-    from tbd_taichi.sgds import Track
+    from tbd_taichi.methods.sgds.confirmation import Track
 
     tracker = SGDSPF((40, 40), snr=2.0, engine="numpy")
     places = {1: (5.0, 5.0), 2: (6.9, 5.0), 3: (20.0, 5.0), 4: (20.0, 7.0), 5: (5.0, 20.0), 6: (6.5, 20.0),

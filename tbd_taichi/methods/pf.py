@@ -12,15 +12,18 @@ says "present" more likely than not); each run of declared frames is one track.
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .errors import ParameterError
-from .background import DEFAULT_BACKGROUND, Preprocessor
-from .params import snr_band
-from .particles import ParticlePool
-from .simulate import intensity_for_snr
-from .tables import TRACK_DTYPE, make_table
+from ..errors import ParameterError
+from ..background import DEFAULT_BACKGROUND, Preprocessor
+from .sgds.params import snr_band
+from ..particles import ParticlePool
+from ..simulate import intensity_for_snr
+from ..tables import TRACK_DTYPE, make_table
+from .registry import MethodSpec, param, validate_params
 
 # SGDS-PF Table 3, original PF particle numbers by SNR band [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6), (0,1.4)
 TABLE3 = {50: (10_000, 14_000, 18_000, 24_000, 30_000), 200: (14_000, 20_000, 25_000, 30_000, 60_000)}
@@ -48,6 +51,30 @@ def birth_intensity_range(snr: float, psf_sigma: float = 0.7) -> tuple[float, fl
     return intensity_for_snr(max(snr - 2.0, 0.5), psf_sigma), intensity_for_snr(snr + 3.0, psf_sigma)
 
 
+@dataclass(frozen=True)
+class PFParams:
+    """The original PF's parameters (Ristic et al. 2004, ch. 11, as SGDS-PF's §3 runs it)."""
+
+    snr: float = param(1.4, doc="lowest target SNR to detect: the newborn intensity range and Table 3's count",
+                       symbol="SNR", source="SGDS-PF Eqs. 1, 26", low=0, low_closed=False)
+    n_particles: int | None = param(None, doc="particles (auto: SGDS-PF Table 3 for the image size and SNR)",
+                                    symbol="N", unit="particles", source="SGDS-PF Tables 3, 5", low=1,
+                                    optional=True)
+    pb: float = param(0.05, doc="birth probability (E 0 → 1)", symbol="P_b", source="Eq. 7", low=0, high=1)
+    pd: float = param(0.05, doc="death probability (E 1 → 0)", symbol="P_d", source="Eq. 8", low=0, high=1)
+    threshold: float = param(0.5, doc="declare a target while the existence probability exceeds this",
+                             symbol="P_E threshold", source="not in the paper", low=0, high=1, low_closed=False,
+                             high_closed=False)
+    q1: float = param(0.001, doc="process noise of the NCV motion", symbol="q1", unit="px²/frame³",
+                      source="SGDS-PF Eq. 46", low=0)
+    q2: float = param(0.01, doc="process noise of the intensity random walk", symbol="q2",
+                      source="SGDS-PF Eq. 46", low=0)
+    psf_sigma: float = param(0.7, doc="standard deviation of the Gaussian PSF", symbol="Σ", unit="px",
+                             source="SGDS-PF Eq. 14", low=0, low_closed=False)
+    vmax: float = param(1.0, doc="newborn speed U[0, vmax]", unit="px/frame", source="not in the paper", low=0)
+    systematic: bool = param(False, doc="systematic instead of multinomial resampling", source="Eq. 18")
+
+
 class OriginalPF:
     """Single-target PF-TBD over a frame stream.
 
@@ -61,8 +88,9 @@ class OriginalPF:
                  background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, systematic: bool = False):
         if len(shape) != 2 or min(shape) < 5:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 5, got {shape}")
-        if snr <= 0 or not 0 < threshold < 1:
-            raise ParameterError("snr must be > 0 and threshold in (0, 1)")
+        self.params = validate_params(PFParams(snr=snr, n_particles=n_particles, pb=pb, pd=pd, threshold=threshold,
+                                               q1=q1, q2=q2, psf_sigma=psf_sigma, vmax=vmax, systematic=systematic),
+                                      "original PF")
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_particles = int(n_particles or table3_particles(self.shape, snr))
         self.threshold, self.systematic = threshold, systematic
@@ -77,12 +105,27 @@ class OriginalPF:
         self.declared = False
         self.rows: list[tuple] = []
         self.p_exist: list[float] = []
+        self.stage_seconds = {"normalise": 0.0, "filter": 0.0}
+
+    @property
+    def frames_in(self) -> int:
+        """Raw frames taken so far."""
+        return self.frame
+
+    @property
+    def timings(self) -> dict:
+        """Cumulative wall seconds per stage: normalise (background and σ), filter (step and estimates)."""
+        return dict(self.stage_seconds)
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; returns [(frame, track_id, x, y, vx, vy, intensity, p_exist)] if declared."""
+        t0 = time.perf_counter()
         z = self.preprocess(frame, self.frame)
+        t1 = time.perf_counter()
         self.pool.step(self.frame, z, systematic=self.systematic)
         est = self.pool.estimates()
+        self.stage_seconds["normalise"] += t1 - t0
+        self.stage_seconds["filter"] += time.perf_counter() - t1
         p = float(est.p_exist[0])
         self.p_exist.append(p)
         out = []
@@ -101,3 +144,31 @@ class OriginalPF:
     def finish(self) -> np.ndarray:
         """Every declared row as a tracks table."""
         return make_table(self.rows, TRACK_DTYPE)
+
+
+def pf_params(shape, **overrides) -> PFParams:
+    """The original PF's parameters (``n_particles`` None: Table 3 for ``shape`` and ``snr``), validated."""
+    return validate_params(PFParams(**overrides), "original PF")
+
+
+def pf_particles(shape, params: PFParams) -> int:
+    """The configured count, or Table 3's for ``shape`` and ``snr``."""
+    return params.n_particles or table3_particles(shape, params.snr)
+
+
+def pf_tracker(shape, params: PFParams, *, seed: int, engine: str, arch, init_box=None, **options) -> "OriginalPF":
+    return OriginalPF(shape, seed=seed, engine=engine, arch=arch, **options, **asdict(params))
+
+
+SPEC = MethodSpec(
+    name="pf", title="original PF",
+    paper="Ristic, Arulampalam & Gordon 2004",
+    kind="point-tbd",
+    description="single-target particle-filter TBD with a Markov existence variable over the whole image; "
+                "the baseline of SGDS-PF's comparisons",
+    params=PFParams, factory=pf_tracker, make_params=pf_params,
+    options=("background", "bad_pixels"),
+    aliases={"snr": "snr", "particles": "n_particles", "threshold": "threshold"},
+    rank=1, particle_count=pf_particles,
+    assumes="one point target (Gaussian PSF, Σ = 0.7 px) moving ≤ 1 px/frame, noise normalised to σ = 1",
+)

@@ -1,0 +1,29 @@
+"""The one place that chooses the engine: ``"taichi"`` (the kernels of ``tbd_taichi.kernels``) or ``"numpy"``
+(their vectorised twins in ``tbd_taichi.numpy_kernels``, same names and contracts).  Schedulers ask
+:func:`kernel_module` for the module of a concept and use what it holds the same way on either engine."""
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+from .errors import ParameterError
+
+ENGINES = ("taichi", "numpy")
+
+
+def check_engine(engine: str) -> str:
+    """``engine`` if it is one of ENGINES, else a ParameterError listing them."""
+    if engine not in ENGINES:
+        raise ParameterError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    return engine
+
+
+def kernel_module(engine: str, concept: str, arch: str | None = None) -> ModuleType:
+    """The module of ``concept`` (e.g. "background", "particles") for ``engine``: ``tbd_taichi.kernels.<concept>``
+    (with the Taichi runtime started on ``arch`` if it is not yet) or ``tbd_taichi.numpy_kernels.<concept>``."""
+    if check_engine(engine) == "taichi":
+        from . import backend
+
+        backend.ensure_init(arch)
+        return importlib.import_module(f"tbd_taichi.kernels.{concept}")
+    return importlib.import_module(f"tbd_taichi.numpy_kernels.{concept}")

@@ -1,0 +1,44 @@
+"""SGDS-PF, the saliency-guided double-stage particle filter (Jia et al., Sensors 2022): the method's
+registry entry.  The tracker is :mod:`.tracker`, its parameters :mod:`.params`, its tracking-mode bookkeeping
+:mod:`.confirmation` and its particle populations :mod:`.populations`; docs/methods/sgds.md maps the paper's
+equations to them."""
+from __future__ import annotations
+
+from dataclasses import asdict
+
+from ..registry import MethodSpec
+from .params import PAPER_SALIENCY, SGDSParams
+from .tracker import MIN_FRAMES, PIPELINE_STAGES, SGDSPF
+
+
+def sgds_params(shape, snr: float | None = None, **overrides) -> SGDSParams:
+    """Table 2's preset for ``snr`` (default 1.4, the paper's choice for an unknown SNR), then ``overrides``."""
+    return SGDSParams.for_snr(SGDSParams.snr if snr is None else snr, **overrides)
+
+
+def sgds_particles(shape, params: SGDSParams) -> int:
+    """Searching particles N_sump × blocks (Table 2; each potential target adds N_tpf)."""
+    from ...saliency import block_grid
+
+    return params.N_sump * block_grid(shape, params.L_ib).n_blocks
+
+
+def sgds_tracker(shape, params: SGDSParams, *, seed: int, engine: str, arch, init_box=None, **options) -> SGDSPF:
+    return SGDSPF(shape, seed=seed, engine=engine, arch=arch, **options, **asdict(params))
+
+
+SPEC = MethodSpec(
+    name="sgds", title="SGDS-PF",
+    paper="Jia et al., Sensors 2022",
+    kind="point-tbd",
+    description="saliency-guided double-stage PF: saliency proposals feed one searching PF per image block; "
+                "potential targets move to tracking PFs with confidence-based confirmation (many targets)",
+    params=SGDSParams, factory=sgds_tracker, make_params=sgds_params,
+    min_frames=MIN_FRAMES,
+    options=("background", "bad_pixels", "history", "frontend_process"),
+    aliases={"snr": "snr", "min_peak_z": "min_peak_z"},
+    rank=0, particle_count=sgds_particles,
+    assumes="point targets (Gaussian PSF, Σ = 0.7 px) moving ≤ 1 px/frame, SNR ≥ snr (1.4), noise normalised to σ = 1",
+)
+
+__all__ = ["MIN_FRAMES", "PAPER_SALIENCY", "PIPELINE_STAGES", "SGDSPF", "SGDSParams", "SPEC"]
