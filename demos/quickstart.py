@@ -21,7 +21,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import tbd_taichi as tbd  # noqa: E402
-from tbd_taichi.methods.pf import OriginalPF  # noqa: E402
 
 
 def brightest_box_detector(frames: np.ndarray) -> np.ndarray:
@@ -51,8 +50,8 @@ def main() -> None:
     tbd.tables.write_csv(scene.truth, out / "seq_truth.csv")
 
     naive = brightest_box_detector(scene.frames)
-    pf = OriginalPF(scene.frames.shape[1:], snr=args.snr, seed=args.seed)
-    sgds = tbd.SGDSPF(scene.frames.shape[1:], snr=args.snr, seed=args.seed)
+    pf = tbd.make_tracker("pf", scene.frames.shape[1:], snr=args.snr, seed=args.seed)  # tbd.methods.names()
+    sgds = tbd.make_tracker("sgds", scene.frames.shape[1:], snr=args.snr, seed=args.seed)
     for frame in scene.frames:
         pf.update(frame)
         sgds.update(frame)

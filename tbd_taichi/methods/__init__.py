@@ -46,6 +46,13 @@ def register(spec: MethodSpec) -> MethodSpec:
     return spec
 
 
+def unregister(name: str) -> None:
+    """Remove method ``name`` (one added with :func:`register`) from the registry."""
+    _discover()
+    get(name)
+    del _REGISTRY[name]
+
+
 def names() -> list[str]:
     """The registered methods' names, in listing order (the flagship first, then by name)."""
     _discover()
@@ -142,4 +149,4 @@ def methods_table() -> str:
 
 
 __all__ = ["KINDS", "MethodSpec", "ParamInfo", "Tracker", "get", "make_tracker", "methods_table", "names", "param",
-           "register", "specs", "track"]
+           "register", "specs", "track", "unregister"]

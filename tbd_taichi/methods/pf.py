@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from .sgds.params import snr_band
 from ..particles import ParticlePool
 from ..simulate import intensity_for_snr
 from ..tables import TRACK_DTYPE, make_table
-from .registry import MethodSpec, param, validate_params
+from .registry import MethodSpec, keyword_factory, param, validate_params
 
 # SGDS-PF Table 3, original PF particle numbers by SNR band [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6), (0,1.4)
 TABLE3 = {50: (10_000, 14_000, 18_000, 24_000, 30_000), 200: (14_000, 20_000, 25_000, 30_000, 60_000)}
@@ -156,17 +156,13 @@ def pf_particles(shape, params: PFParams) -> int:
     return params.n_particles or table3_particles(shape, params.snr)
 
 
-def pf_tracker(shape, params: PFParams, *, seed: int, engine: str, arch, init_box=None, **options) -> "OriginalPF":
-    return OriginalPF(shape, seed=seed, engine=engine, arch=arch, **options, **asdict(params))
-
-
 SPEC = MethodSpec(
     name="pf", title="original PF",
     paper="Ristic, Arulampalam & Gordon 2004",
     kind="point-tbd",
     description="single-target particle-filter TBD with a Markov existence variable over the whole image; "
                 "the baseline of SGDS-PF's comparisons",
-    params=PFParams, factory=pf_tracker, make_params=pf_params,
+    params=PFParams, factory=keyword_factory(OriginalPF), make_params=pf_params,
     options=("background", "bad_pixels"),
     aliases={"snr": "snr", "particles": "n_particles", "threshold": "threshold"},
     rank=1, particle_count=pf_particles,

@@ -177,6 +177,15 @@ def _type_words(info: ParamInfo) -> str:
     return str(info.range) if info.range.choices else f"a {info.type.__name__}"
 
 
+def keyword_factory(tracker_cls) -> Callable:
+    """A ``MethodSpec.factory`` for a tracker class that takes (shape, seed=, engine=, arch=, **options) and
+    every parameter as a keyword argument of its own name."""
+    def factory(shape, params, *, seed: int, engine: str, arch, init_box=None, **options):
+        return tracker_cls(shape, seed=seed, engine=engine, arch=arch, **options, **dataclasses.asdict(params))
+    factory.__doc__ = f"A {tracker_cls.__name__} from validated parameters."
+    return factory
+
+
 @dataclass(frozen=True)
 class MethodSpec:
     """A registered method.
@@ -232,7 +241,8 @@ class MethodSpec:
         rows = [("parameter", "default", "unit", "valid", "paper", "what it is")]
         for p in self.param_infos():
             default = "auto" if p.default is None else f"{p.default:g}" if isinstance(p.default, float) else str(p.default)
-            valid = str(p.range) if (p.type in (int, float) or p.range.choices) else p.type.__name__
+            rng = dataclasses.replace(p.range, integer=True) if p.type is int else p.range
+            valid = str(rng) if (p.type in (int, float) or rng.choices) else p.type.__name__
             if p.optional:
                 valid += " or auto"
             paper = " ".join(s for s in (p.symbol, f"({p.source})" if p.source else "") if s)

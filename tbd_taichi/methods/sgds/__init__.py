@@ -4,9 +4,7 @@ registry entry.  The tracker is :mod:`.tracker`, its parameters :mod:`.params`, 
 equations to them."""
 from __future__ import annotations
 
-from dataclasses import asdict
-
-from ..registry import MethodSpec
+from ..registry import MethodSpec, keyword_factory
 from .params import PAPER_SALIENCY, SGDSParams
 from .tracker import MIN_FRAMES, PIPELINE_STAGES, SGDSPF
 
@@ -23,17 +21,13 @@ def sgds_particles(shape, params: SGDSParams) -> int:
     return params.N_sump * block_grid(shape, params.L_ib).n_blocks
 
 
-def sgds_tracker(shape, params: SGDSParams, *, seed: int, engine: str, arch, init_box=None, **options) -> SGDSPF:
-    return SGDSPF(shape, seed=seed, engine=engine, arch=arch, **options, **asdict(params))
-
-
 SPEC = MethodSpec(
     name="sgds", title="SGDS-PF",
     paper="Jia et al., Sensors 2022",
     kind="point-tbd",
     description="saliency-guided double-stage PF: saliency proposals feed one searching PF per image block; "
                 "potential targets move to tracking PFs with confidence-based confirmation (many targets)",
-    params=SGDSParams, factory=sgds_tracker, make_params=sgds_params,
+    params=SGDSParams, factory=keyword_factory(SGDSPF), make_params=sgds_params,
     min_frames=MIN_FRAMES,
     options=("background", "bad_pixels", "history", "frontend_process"),
     aliases={"snr": "snr", "min_peak_z": "min_peak_z"},
