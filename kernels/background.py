@@ -2,10 +2,8 @@
 
 Every kernel takes (H, W) float32 ndarrays (NumPy arrays on the CPU), so it compiles once
 per process whatever the image size, and a template flag ``serial`` (one compiled variant
-each): row loops on one thread, for images where a parallel launch costs more than the work
-(on the 2-core CPU it cut the spatiotemporal preprocessing of a 320×256 frame from 8.3 to
-about 4 ms).  The NumPy twin is
-``tbd_taichi.numpy_kernels.background``.  Borders are replicated (the nearest pixel
+each): row loops on one thread, for images where a parallel launch costs more than the work.
+The NumPy twin is ``tbd_taichi.numpy_kernels.background``.  Borders are replicated (the nearest pixel
 inside the image), as in ``cv2.BORDER_REPLICATE`` and ``scipy.ndimage`` mode "nearest".
 Running sums are f64, rounded to f32 once.
 """

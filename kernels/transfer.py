@@ -1,8 +1,8 @@
 """Copies between Taichi fields and host (NumPy) arrays, as typed kernels.
 
-``field.to_numpy()`` and ``field.from_numpy()`` cost about 0.2 ms per call on the CPU
-backend (generic argument handling), whatever the size; these kernels take the field as a
-template and the array with a fixed number of dimensions, and cost about 40 µs.  Shapes
+``field.to_numpy()`` and ``field.from_numpy()`` pay Taichi's generic argument handling on every
+call, whatever the size; these kernels take the field as a template and the array with a fixed
+number of dimensions, so a call costs a fraction of that.  Shapes
 are checked by the callers, ``tbd_taichi.backend.to_host`` / ``from_host``, which are
 plain NumPy copies for the NumPy engine's arrays.  ``serial`` runs the loop on one thread
 (the CPU, where a parallel launch costs more than the copy).

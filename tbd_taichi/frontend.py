@@ -13,10 +13,8 @@ holds the GIL while a kernel runs, so threads cannot overlap the two.)  Where th
 its CPU workers (``backend.init``), the child runs one thread on the last worker's CPU at idle
 priority (``backend.run_in_background``): it takes only the time the tracker leaves that CPU,
 mostly while this process runs serial code, and a worker that wakes for a parallel loop does not
-wait for it (1.4 preset at 320×256: 5.4–5.5 ms per frame against 6.2–6.4 ms in one process; before
-the tracking PFs joined the searching PFs' launch 6.1–6.8 ms, 7.2–7.5 ms with the child left to the scheduler
-and 7.4–7.6 ms in one process).  Frames pass through shared memory; the results
-are the same bits, one frame later.
+wait for it (faster per frame than one process; docs/performance.md has the figures).  Frames pass
+through shared memory; the results are the same bits, one frame later.
 """
 from __future__ import annotations
 

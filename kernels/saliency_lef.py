@@ -1,0 +1,152 @@
+"""Second saliency layer, segmentation statistics and the likelihood estimation filter (SGDS-PF
+Eqs. 22–28, and the multi-frame LEF) as Taichi kernels.
+
+The 5×5 correlation of Eq. 27 reads 0 outside the image.
+"""
+import taichi as ti
+
+from .loops import thread_span
+from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_rows, frame_vector,
+                             lane_shift, store_row_moments, sum_of_slots)
+from .saliency_maxfilter import column_max, row_max
+
+
+@ti.func
+def second_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, dst: ti.template(),
+                     rows: ti.template(), serial: ti.template()):
+    """Second layer of Eq. 22: I_acc2 = (Σ of 3 I_acc_max slots)·scale, with per-row (Σ v, Σ v²) in f64.
+
+    Padding lanes of I_acc_max are 0, so they add nothing to the sums.
+    """
+    ti.loop_config(serialize=serial, block_dim=ROW_BLOCK)
+    for y in range(src.shape[1]):
+        s1 = VEC64(0.0)
+        s2 = VEC64(0.0)
+        for xb in range(src.shape[2]):
+            v = sum_of_slots(src, a, b, c, y, xb) * scale
+            dst[0, y, xb] = v
+            s1, s2 = add_lane_moments(v, s1, s2)
+        store_row_moments(rows, 0, y, s1, s2)
+
+
+@ti.func
+def mean_std(rows: ti.template(), s: ti.i32, count: ti.f64) -> ti.types.vector(2, ti.f64):
+    """(mean, N−1 std as MATLAB's std2) from per-row sums rows[s, y], rows added top to bottom."""
+    s1 = ti.cast(0.0, ti.f64)
+    s2 = ti.cast(0.0, ti.f64)
+    for y in range(rows.shape[1]):
+        s1 += rows[s, y, 0]
+        s2 += rows[s, y, 1]
+    mean = s1 / count
+    var = ti.max(s2 - s1 * mean, 0.0) / ti.max(count - 1.0, 1.0)
+    return ti.Vector([mean, ti.sqrt(var)], dt=ti.f64)
+
+
+@ti.func
+def threshold_and_intensity_range(acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32, snr: ti.f64,
+                                  count: ti.f64, stats: ti.template()):
+    """Eq. 23 threshold and Eq. 26 intensity range (one serial task).
+
+    stats = [T_acc2, I_min (clamped ≥ 0), I_max, mean(I_acc2), std2(I_acc2), mean(z), std2(z)].
+    """
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        acc2 = mean_std(acc2_rows, 0, count)
+        z = mean_std(z_rows, zs, count)
+        stats[0] = acc2[1] * (ti.f64(2.2) * snr - ti.f64(2.0)) + acc2[0]  # f64 literals: 2.2 is inexact in f32
+        stats[1] = ti.max(z[0] + (snr - ti.f64(2.0)) * z[1], ti.f64(0.0))
+        stats[2] = z[0] + (snr + ti.f64(3.0)) * z[1]
+        stats[3] = acc2[0]
+        stats[4] = acc2[1]
+        stats[5] = z[0]
+        stats[6] = z[1]
+
+
+@ti.func
+def correlate_d(z: ti.template(), zs: ti.i32, d: ti.template(), y: ti.i32, xb: ti.i32) -> VEC:
+    """(z ⋆ D) at the 8 pixels of (y, xb) over the 5×5 window, zero outside the image (Eq. 27's B·σ²);
+    terms added in (dy, dx) row-major order, like the NumPy twin."""
+    acc = VEC(0.0)
+    for dy in ti.static(range(5)):
+        if 0 <= y + dy - 2 < z.shape[1]:
+            prev = frame_vector(z, zs, y + dy - 2, xb - 1)
+            cur = frame_vector(z, zs, y + dy - 2, xb)
+            nxt = frame_vector(z, zs, y + dy - 2, xb + 1)
+            for dx in ti.static(range(5)):
+                acc += d[dy, dx] * lane_shift(prev, cur, nxt, dx - 2)
+    return acc
+
+
+@ti.func
+def lef_log_weight(b, a, i_min, i_max):
+    """Eqs. 27–28: max over I in [i_min, i_max] of −A·I² + B·I, at I_c = clamp(B/(2A)) (scalar or lanes)."""
+    ic = ti.min(ti.max(b / (ti.f32(2.0) * a), i_min), i_max)
+    return b * ic - a * (ic * ic)
+
+
+@ti.func
+def multi_frame_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
+                    valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
+                    n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+    """Multi-frame LEF (not in the paper; a dynamic-programming accumulation of Eq. 27):
+    memory[dst] = log ω̌⁺(z[zs]) + γ·max_{(2r+1)²} memory[src], γ = ``memory_decay``, where
+    log ω̌⁺ = max over I ≥ 0 of −A·I² + B·I (Eqs. 27–28 without the Eq. 26 bounds: (z⋆D)²/(4A)
+    where z⋆D > 0, else 0).  The max filter lets the best path move ≤ r px per frame, so a
+    target's evidence adds up along its track over about 1/(1 − γ) frames, while noise peaks
+    do not line up.  The max filter is streamed like :func:`accumulate_max`; padding lanes 0."""
+    h = memory.shape[1]
+    span = ti.static(thread_span(serial))
+    ti.loop_config(serialize=serial)
+    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
+        if u % span == 0:
+            c = u // span
+            y0, y1 = chunk_rows(c, n_chunks, h)
+            for y in range(y0 - r, y1 + r):
+                if 0 <= y < h:
+                    row_max(memory, src, y, ring, c, y % (2 * r + 1), valid, r)
+                yc = y - r
+                if y0 <= yc < y1:
+                    column_max(ring, c, yc, h, memory, dst, valid, r)
+                    for xb in range(memory.shape[2]):
+                        lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
+                        memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
+
+
+@ti.kernel
+def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
+                   valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
+                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
+    """One launch of :func:`multi_frame_lef`."""
+    multi_frame_lef(z, zs, d, a, memory_decay, valid, memory, src, dst, ring, n_chunks, r, serial)
+
+
+@ti.kernel
+def second_layer_and_lef(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32,
+                         acc2: ti.template(), acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32,
+                         snr: ti.f64, count: ti.f64, stats: ti.template(), z: ti.template(), d: ti.template(),
+                         lef_a: ti.f32, memory_decay: ti.f32, valid: ti.template(), memory: ti.template(),
+                         ms_src: ti.i32, ms: ti.i32, ring: ti.template(), n_chunks: ti.i32, r: ti.template(),
+                         accumulated: ti.template(), serial: ti.template()):
+    """The frame in slot ``zs``, first half: :func:`second_layer_sum`, :func:`threshold_and_intensity_range`
+    and, with ``accumulated``, :func:`multi_frame_lef` (memory slot ``ms_src`` → ``ms``), in one launch."""
+    second_layer_sum(acc_max, a, b, c, scale, acc2, acc2_rows, serial)
+    threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
+    if ti.static(accumulated):
+        multi_frame_lef(z, zs, d, lef_a, memory_decay, valid, memory, ms_src, ms, ring, n_chunks, r, serial)
+
+
+# ---------------------------------------------------------------- single operators (tests, figures)
+
+@ti.kernel
+def lef_map(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, i_min: ti.f32,
+            i_max: ti.f32, out: ti.template()):
+    """Likelihood estimation filter (Eqs. 25–28) at every pixel of a lane ring: log ω̌_lef (σ = 1)."""
+    for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
+        out[0, y, xb] = lef_log_weight(correlate_d(z, zs, d, y, xb), a, i_min, i_max)
+
+
+@ti.kernel
+def correlate_map(z: ti.template(), zs: ti.i32, d: ti.template(), out: ti.template()):
+    """z ⋆ D at every pixel of a lane ring (zero padding)."""
+    for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
+        out[0, y, xb] = correlate_d(z, zs, d, y, xb)
