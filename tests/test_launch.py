@@ -223,7 +223,7 @@ def test_fields_made_between_lean_launches_are_materialised():
     kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
     src, dst = np.arange(6, dtype=np.float32), np.zeros(6, np.float32)
     kernels.add_into(src, dst)
-    runtime = launch.impl.get_runtime()
+    runtime = launch.INTERNALS.impl.get_runtime()
     assert launch.fields_unchanged(runtime)
     late = ti.field(ti.f32, shape=6)  # a new field: the next launch must place it, as Taichi's own would
     assert not launch.fields_unchanged(runtime)
@@ -259,3 +259,59 @@ def test_launch_clock_adds_the_time_of_launches_made_while_it_is_active(monkeypa
         with launch.LaunchClock():
             raise RuntimeError("stop")
     assert launch.LAUNCH_CLOCKS == []
+
+
+def test_taichi_internals_the_lean_path_uses_are_there_and_behave_as_assumed(taichi_calls):
+    """Fails loudly on a Taichi upgrade that moves or changes the private names of launch.taichi_internals
+    (the lean path would otherwise fall back to Taichi's launch without a word)."""
+    assert launch.INTERNALS is not None, "launch.taichi_internals: this Taichi lacks a private name the lean path uses"
+    assert launch.taichi_internals() is not None
+    assert isinstance(mixed._primal.arguments, list) and mixed._primal.return_type is None and total._primal.return_type
+    assert launch.argument_kinds(mixed._primal, 0) == (("i", 0), ("u", 0), ("f", 0), ("f", 0), ("a", 0), ("a", 1),
+                                                        ("t", 0), ("t", 0), ("a", 0))
+    assert isinstance(Scaled(2).scale, launch.INTERNALS.bound_method)
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    src, dst = np.arange(4, dtype=np.float32), np.zeros(4, np.float32)
+    kernels.add_into(src, dst)  # through Taichi: compiles, and the lean path keeps the compiled kernel
+    prog, kernel_cpp, data, _ = next(iter(kernels.add_into.compiled.values()))
+    assert prog is launch.INTERNALS.impl.get_runtime().prog and not add_into._primal.has_print
+    assert kernel_cpp is add_into._primal.compiled_kernels[add_into._primal.ensure_compiled(src, dst)]
+    kernels.add_into(src, dst)  # lean
+    np.testing.assert_array_equal(dst, 2 * src)
+    assert taichi_calls == ["add_into"]
+
+
+def test_without_the_internals_kernels_launch_through_taichis_public_call(monkeypatch, rng):
+    """The fallback: a Taichi lacking the private names (INTERNALS None) gets the kernels themselves."""
+    monkeypatch.setattr(launch, "INTERNALS", None)
+    kernels = launch.Launcher(types.SimpleNamespace(mixed=mixed, add_into=add_into))
+    assert kernels.mixed is mixed and kernels.add_into is add_into
+    src, vec, table = mixed_inputs(rng)
+    out = np.empty(len(src))
+    kernels.mixed(3, 7, 1.5, -2.25, src, vec, table, True, out)
+    np.testing.assert_allclose(out, reference(3, 7, 1.5, -2.25, src, vec, table.to_numpy(), True), rtol=1e-6)
+    obj = Scaled(3)
+    assert launch.Launcher(obj).scale(2.0, np.ones(3, np.float32)) is None
+    np.testing.assert_array_equal(obj.values.to_numpy(), np.full(3, 2.0, np.float32))
+
+
+def test_a_kernel_whose_internals_differ_falls_back_to_taichis_launch(monkeypatch, taichi_calls):
+    """Where a kernel's own private attributes are not as assumed, that kernel keeps Taichi's launch."""
+    kernels = launch.Launcher(types.SimpleNamespace(add_into=add_into))
+    fast = kernels.add_into
+    monkeypatch.setattr(fast, "kernel", _NoInternals(add_into._primal))
+    src, dst = np.arange(5, dtype=np.float32), np.zeros(5, np.float32)
+    for _ in range(3):
+        fast(src, dst)
+    np.testing.assert_array_equal(dst, 3 * src)
+    assert taichi_calls == ["add_into"] * 3 and not fast.compiled and fast.kinds is None
+
+
+class _NoInternals:
+    """A kernel that launches but has none of the compiled-kernel internals (as after a Taichi upgrade)."""
+
+    def __init__(self, kernel):
+        self._kernel, self.func, self.has_print = kernel, kernel.func, False
+
+    def __call__(self, *args, **kwargs):
+        return self._kernel(*args, **kwargs)
