@@ -13,10 +13,13 @@ to the host:
   test deciding which PPs are handed over or dropped (the tracker's path: no host round trip between them).
 
 Particles are addressed in *state order* (group, then slot), as ``ParticlePool.state`` lists
-them.  A mixin of ``ParticleKernels`` (it uses the pool's fields); the NumPy twin is
+them.  A mixin over the ``ParticleKernels`` fields, combined with them in :class:`SearchingKernels` (the
+kernels of ``tbd_taichi.methods.sgds.searching_pool.SearchingPool``); the NumPy twin is
 ``tbd_taichi.numpy_kernels.populations``.
 """
 import taichi as ti
+
+from .particles import ParticleKernels
 
 # columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
 P_KEPT, P_KEPT_E, P_TP, P_X, P_Y = range(5)
@@ -38,27 +41,6 @@ class PopulationKernels:
         # eliminate_and_hand_over's decisions: per PP drop flag and rank, per rank its first member column
         self.pp_drop, self.pp_rank, self.pp_cursor = ti.field(ti.i8, capacity), ti.field(ti.i32, capacity), \
             ti.field(ti.i32, capacity)
-
-    @ti.func
-    def state_starts(self):
-        """state_start[g]: index of group g's first live particle in state order (prefix of n)."""
-        ti.loop_config(serialize=True)
-        for _ in range(1):  # one task
-            s = 0
-            for h in range(self.n.shape[0]):
-                self.state_start[h] = s
-                s += self.n[h]
-
-    @ti.func
-    def for_states(self, body: ti.template(), b: ti.i32, arrays: ti.template()):
-        """body(s, i, b, arrays) for every live particle, s its index in state order and i its slot
-        (after ``state_starts``); one task per group, slots in order.  ``arrays``: the kernel's array
-        arguments, as ``ti.static((…))``."""
-        ti.loop_config(serialize=self.serial)
-        for g in range(self.n.shape[0]):
-            s0, off = self.state_start[g], self.off[g]
-            for i in range(off, off + self.n[g]):
-                body(s0 + i - off, i, b, arrays)
 
     @ti.kernel
     def eliminate(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -268,17 +250,13 @@ class PopulationKernels:
         if p >= 0 and self.pixel_key[p // w, p % w] == self.index_key(s):
             index[p // w, p % w] = self.seq[b, i]
 
-    @ti.kernel
-    def read_seq(self, b: ti.i32, seq: ti.types.ndarray(dtype=ti.i32, ndim=1)):
-        """The Seq of every live particle, in state order."""
-        self.seq_in_state_order(b, seq)
 
-    @ti.func
-    def seq_in_state_order(self, b: ti.i32, seq: ti.template()):
-        self.state_starts()
-        self.for_states(self.copy_seq, b, ti.static((seq,)))
+@ti.data_oriented
+class SearchingKernels(ParticleKernels, PopulationKernels):
+    """The particle pool's kernels with Eqs. 36–38 on its fields: SGDS-PF's searching PFs."""
 
-    @ti.func
-    def copy_seq(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
-        seq = ti.static(arrays[0])
-        seq[s] = self.seq[b, i]
+    def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
+                 flat: bool, split: int = 1, motion=None, likelihood=None):
+        super().__init__(capacity, n_groups, n_tiles, frame_shape, map_capacity, serial, flat, split, motion,
+                         likelihood)
+        self.population_fields(capacity, frame_shape)

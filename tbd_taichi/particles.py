@@ -32,11 +32,10 @@ import numpy as np
 from . import backend
 from .engines import check_engine
 from .errors import ParameterError
+from .kernels.particles.layout import FLOAT_STATE, INT_STATE, STATE  # noqa: F401  (STATE: re-exported)
 
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
-FLOAT_STATE, INT_STATE = ("x", "vx", "y", "vy", "inten"), ("e", "tp", "seq")
-STATE = FLOAT_STATE + INT_STATE  # a particle's state
 SERIAL_PARTICLES = 1 << 16  # up to this many slots, serial loops beat a parallel launch on the CPU
 # with at most this many CPU threads the particle loops stay serial at any size: on the 2-core VM a step of
 # 392,000 particles in 49 groups (1024×1024 at the SNR 1.4 preset) takes 29 ms serial and 37 ms parallel
@@ -123,15 +122,13 @@ class ParticlePool:
             flat = one_thread_per_slot(backend.current().arch)
             serial = not flat and (serial or backend.cpu_threads() <= SERIAL_THREADS)
             split = tile_threads(self.capacity, len(tiles), flat)
-            from .kernels.particles import ParticleKernels as Kernels
-        else:
-            from .numpy_kernels.particles import NumpyParticleKernels as Kernels
+        Kernels = self._kernels_class(engine)
         self.split = split  # threads sharing the tile loops (kernels.particles.ParticleKernels.for_tiles)
         dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat, split)
         if engine == "taichi":
             from .launch import Launcher
 
-            self.k = Launcher(backend.reusable(self, ("particles",) + dims, lambda: Kernels(*dims)))
+            self.k = Launcher(backend.reusable(self, (Kernels.__name__,) + dims, lambda: Kernels(*dims)))
         else:
             self.k = Kernels(*dims)
         slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)
@@ -148,7 +145,6 @@ class ParticlePool:
         self._no_seq = np.zeros(1, np.int32)  # step's Seq output when none is read
         self._z = self._bordered_frame()  # the normalised frame weigh reads, zero-bordered
         self._step_z = self._bordered_frame()  # step's copy of its frame
-        self._eliminated = None  # (particles, populations) of the last eliminate, until its hand_over
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
@@ -161,6 +157,18 @@ class ParticlePool:
             else:
                 target.fill(0)
         self.set_proposal_map({})
+
+    @staticmethod
+    def _kernels_class(engine: str):
+        """The kernels behind the pool: ``kernels.particles.ParticleKernels`` or its NumPy twin (a subclass of the
+        pool may add kernels of its own, as SGDS-PF's ``SearchingPool`` does)."""
+        if engine == "taichi":
+            from .kernels.particles import ParticleKernels
+
+            return ParticleKernels
+        from .numpy_kernels.particles import NumpyParticleKernels
+
+        return NumpyParticleKernels
 
     # ------------------------------------------------------------ host ↔ engine
 
@@ -304,8 +312,6 @@ class ParticlePool:
         ends = np.cumsum(self.counts, dtype=np.int64)
         return (before[ends] - before[ends - self.counts]).astype(np.int32)
 
-    # ------------------------------------------------------------ particle populations (SGDS-PF Eqs. 36–38)
-
     def seq_in_state_order(self, out: np.ndarray | None = None) -> np.ndarray:
         """The Seq (particle-population label, Eq. 36) of every live particle, in :meth:`state` order;
         into the front of ``out`` (int32, at least that long) if given, which saves a fresh array per frame."""
@@ -337,112 +343,6 @@ class ParticlePool:
         out.update(zip(INT_STATE, ints))
         out.update(group=group, slot=slots.astype(np.int64))
         return out
-
-    def eliminate(self, pp, size, take, phase) -> tuple[np.ndarray, np.ndarray]:
-        """Eq. 37 on the device: particle s (state order) belongs to population pp[s] of ``size[k]``
-        particles, ``take[k]`` of which go, spread over the population by ``phase[k]`` ∈ [0, 1).
-        Returns the survivors' flags (state order) and per population the sums over survivors
-        (columns ``kernels.populations.P_*``: count, count with E = 1, Σ Tp, Σ x and Σ y with E = 1).
-        The pool is unchanged until :meth:`hand_over`, which must come next."""
-        from .kernels.populations import N_PP_SUMS, P_KEPT
-
-        pp, table, n = self._population_table(pp, size, take, phase)
-        keep = np.zeros(n, np.int8)
-        sums = np.zeros((table.shape[1], N_PP_SUMS))
-        if n:
-            self.k.eliminate(self.buf, pp, table, keep, sums)
-        self._eliminated = (n, sums[:, P_KEPT].astype(np.int64))  # particles, and survivors per population
-        return keep.view(bool), sums  # 0 or 1 in int8
-
-    def _population_table(self, pp, size, take, phase) -> tuple[np.ndarray, np.ndarray, int]:
-        """Checked :meth:`eliminate` arguments: (pp as int32, the (size, take, phase) table in f64, live particles)."""
-        pp = np.ascontiguousarray(pp, dtype=np.int32).reshape(-1)
-        table = np.array([size, take, phase], dtype=np.float64).reshape(3, -1)
-        n = int(self.counts.sum())
-        if pp.shape != (n,):
-            raise ParameterError(f"need one population index per live particle ({n}), got {pp.shape}")
-        if n and (pp.min() < 0 or pp.max() >= table.shape[1]):
-            raise ParameterError(f"population indices must lie in [0, {table.shape[1]})")
-        size, take, phase = table
-        if (size < 1).any() or (take < 0).any() or (take > size).any() or ((phase < 0) | (phase >= 1)).any():
-            raise ParameterError("need per population a size ≥ 1, a take in [0, size] and a phase in [0, 1)")
-        return pp, table, n
-
-    def _check_index_image(self, index: np.ndarray) -> None:
-        if index.shape != self.frame_shape or index.dtype != np.int32 or not index.flags.c_contiguous:
-            raise ParameterError(f"index image must be a C-contiguous int32 array of shape {self.frame_shape}")
-
-    @staticmethod
-    def _members(floats: np.ndarray, ints: np.ndarray, m: int) -> dict:
-        """The handed-over particles' states from the kernels' member columns 0…m − 1."""
-        states = dict(zip(FLOAT_STATE, floats[:, :m]))
-        states.update(zip(INT_STATE, ints[:, :m]))
-        return states
-
-    def eliminate_and_hand_over(self, pp, size, take, phase, index: np.ndarray, t_ptp: float, t_pe: float,
-                                tracked, radius: float, most: int) -> tuple[dict, list]:
-        """:meth:`eliminate` and :meth:`hand_over` in one launch, the host's drop and hand-over choice made on the
-        device by Algorithm 1's rule from Eq. 38's sums: a PP with survivors, some of them E = 1, PTp > ``t_ptp``
-        and PE > ``t_pe`` is a potential target; it is dropped if its mean position (E = 1 survivors) lies
-        closer than ``radius`` px to one of ``tracked`` [(x, y), …] (a tracked target), else handed over and
-        dropped, in PP order, while fewer than ``most`` are.  Returns ``hand_over``'s (states, sizes) of the
-        handed PPs."""
-        pp, table, n = self._population_table(pp, size, take, phase)
-        self._check_index_image(index)
-        self._eliminated = None
-        n_pp = table.shape[1]
-        tracked = np.asarray(tracked, np.float64).reshape(-1, 2)
-        rule = np.array([t_ptp, t_pe, radius * radius, max(int(most), 0), len(tracked)], np.float64)
-        if not len(tracked):
-            tracked = np.zeros((1, 2))  # the kernel's array argument, unread
-        outcome = np.full((2, n_pp), -1, np.int32)  # per PP: hand-over rank, survivors
-        floats = np.empty((len(FLOAT_STATE), max(n, 1)), np.float32)
-        ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
-        if n:
-            counts = np.empty(self.n_groups, np.int32)
-            self.k.eliminate_and_hand_over(self.buf, pp, table, rule, tracked, index, counts, outcome, floats, ints)
-            self.counts = counts
-        else:
-            index[...] = 0
-        sizes = outcome[1, outcome[0] >= 0]
-        return self._members(floats, ints, int(sizes.sum())), sizes.tolist()
-
-    def hand_over(self, drop, index: np.ndarray, handed=None) -> tuple[dict, list] | None:
-        """After :meth:`eliminate`: remove its eliminated particles and those of the populations
-        flagged in ``drop``; write the index image P_pp (Eq. 36) into ``index`` (H, W, int32): each
-        pixel gets the Seq of the kept particles in it, those of the larger population winning, then
-        the later in state order (0: none).  ``handed`` (population indices, usually among the dropped):
-        the same launch first reads their particles that survived the elimination, and returns
-        (states, sizes): arrays x, vx, y, vy, inten, e, tp, seq holding population after population in
-        ``handed`` order, each in state order, and the number of each."""
-        if self._eliminated is None:
-            raise ParameterError("hand_over needs an eliminate first")
-        n, kept = self._eliminated
-        n_pp = len(kept)
-        drop = np.ascontiguousarray(drop, dtype=np.int8).reshape(-1)
-        if drop.shape != (n_pp,):
-            raise ParameterError(f"need one drop flag per population ({n_pp}), got {drop.shape}")
-        self._check_index_image(index)
-        want = handed is not None
-        handed = np.asarray(handed if want else [], np.int64).reshape(-1)
-        if len(handed) and (handed.min() < 0 or handed.max() >= n_pp or len(np.unique(handed)) < len(handed)):
-            raise ParameterError(f"handed populations must be distinct indices in [0, {n_pp})")
-        self._eliminated = None
-        sizes = kept[handed]
-        floats = np.empty((len(FLOAT_STATE), max(int(sizes.sum()), 1)), np.float32)
-        ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
-        if n:
-            rank = np.full(n_pp, -1, np.int32)
-            rank[handed] = np.arange(len(handed), dtype=np.int32)
-            cursor = (np.cumsum(sizes) - sizes).astype(np.int32) if len(handed) else np.zeros(1, np.int32)
-            counts = np.empty(self.n_groups, np.int32)
-            self.k.hand_over(self.buf, drop, index, counts, rank, cursor, floats, ints, want)
-            self.counts = counts
-        else:
-            index[...] = 0
-        if not want:
-            return None
-        return self._members(floats, ints, int(sizes.sum())), sizes.tolist()
 
     # ------------------------------------------------------------ one step
 

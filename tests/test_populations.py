@@ -1,4 +1,4 @@
-"""Eq. 37–38 population kernels (ParticlePool.eliminate / hand_over): Taichi against the NumPy twin and
+"""Eq. 37–38 population kernels (SearchingPool.eliminate / hand_over): Taichi against the NumPy twin and
 against a direct host reference."""
 import numpy as np
 import pytest
@@ -6,8 +6,8 @@ import pytest
 from tbd_taichi.errors import ParameterError
 from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
 from tbd_taichi.numpy_kernels.populations import spread_removal
-from tbd_taichi.particles import ParticlePool
 from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
+from tbd_taichi.methods.sgds.searching_pool import SearchingPool
 
 SHAPE = (19, 27)
 CAPS = [900, 40, 1300, 5]
@@ -28,7 +28,7 @@ def pool_engine(engine, monkeypatch):
 def make_pool(engine, rng_seed=0):
     """Groups of several sizes (one empty), Seq labels 0…7 with a large one, positions also outside the image."""
     rng = np.random.default_rng(rng_seed)
-    pool = ParticlePool(CAPS, SHAPE, engine=engine, seed=2)
+    pool = SearchingPool(CAPS, SHAPE, engine=engine, seed=2)
     counts = [700, 0, 1300, 5]
     states = {}
     for g, n in enumerate(counts):
@@ -147,7 +147,7 @@ def test_index_image_prefers_the_larger_population_then_the_later_particle(engin
     """Pixel (3, 4): PPs Seq 1 and Seq 2 (two particles each) tie, the later particle wins;
     pixel (6, 2): Seq 3 (three particles) beats the later Seq 4 particle (a PP of one)."""
     engine = pool_engine(engine, monkeypatch)
-    pool = ParticlePool([10], SHAPE, engine=engine)
+    pool = SearchingPool([10], SHAPE, engine=engine)
     x = np.array([4, 4, 4, 4, 2, 9, 9, 2], np.float32)
     y = np.array([3, 3, 3, 3, 6, 1, 1, 6], np.float32)
     seq = np.array([1, 2, 1, 2, 3, 3, 3, 4], np.int32)

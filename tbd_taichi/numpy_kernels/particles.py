@@ -8,29 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.particles import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
-                                  S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST, NOISE_STREAMS,
-                                  PAD, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI)
-from ..particles import STATE
-from . import rng
-from .populations import NumpyPopulationKernels
+from ..kernels.particles.layout import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
+                                         S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST,
+                                         NOISE_STREAMS, PAD, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, STATE, TILE,
+                                         TWO_PI)
+from . import models, rng
 
 F32 = np.float32
 
 
-def psf_samples(d0: np.ndarray, inv2s2, step, pixels: np.ndarray, size: int) -> np.ndarray:
-    """Twin of the kernels' ``psf_samples``: (n, 5) Gaussian samples by the same ratio recurrence."""
-    g = np.empty((len(d0), 5), F32)
-    gk = np.exp(-d0 * d0 * inv2s2)
-    r = np.exp(-(F32(2.0) * d0 + F32(1.0)) * inv2s2)
-    for k in range(5):
-        g[:, k] = gk
-        gk = gk * r
-        r = r * step
-    return np.where((pixels >= 0) & (pixels < size), g, F32(0))
-
-
-class NumpyParticleKernels(NumpyPopulationKernels):
+class NumpyParticleKernels:
     """Arrays and vectorised steps of one particle pool (same names as the Taichi class; ``serial``, ``flat``
     and ``split``, the Taichi kernels' loop layout, do not change the results and are not used here)."""
 
@@ -153,17 +140,14 @@ class NumpyParticleKernels(NumpyPopulationKernels):
         self.e[b, i] = hit.astype(np.int32)
 
     def propagate(self, seed, frame, b, q1, q2, i_floor, width, height) -> None:
-        q1, q2 = F32(q1), F32(q2)
-        c11, c21, c22 = np.sqrt(q1 / F32(3.0)), np.sqrt(q1) * F32(0.8660254037844386), np.sqrt(q1) * F32(0.5)
+        """Eqs. 9–10 (``models.ncv_step``) for the particles that move; Tp + 1; E ← 0 outside the image."""
+        factors = models.ncv_noise_factors(q1, q2)
         i = self.live_slots()
         i = i[(self.e[b, i] == 1) & ((self.born[i] == 0) | (self.kind[self.slot_group[i]] == 2))]
-        n1, n2, n3, n4, n5 = (rng.normal(seed, frame, stream, i) for stream in NOISE_STREAMS)
-        x = self.x[b, i] + self.vx[b, i] + c11 * n1
-        y = self.y[b, i] + self.vy[b, i] + c11 * n3
-        self.x[b, i], self.y[b, i] = x, y
-        self.vx[b, i] += c21 * n1 + c22 * n2
-        self.vy[b, i] += c21 * n3 + c22 * n4
-        self.inten[b, i] = np.maximum(self.inten[b, i] + np.sqrt(q2) * n5, F32(i_floor))
+        n = tuple(rng.normal(seed, frame, stream, i) for stream in NOISE_STREAMS)
+        x, vx, y, vy, inten = models.ncv_step(self.x[b, i], self.vx[b, i], self.y[b, i], self.vy[b, i],
+                                              self.inten[b, i], n, factors, i_floor)
+        self.x[b, i], self.vx[b, i], self.y[b, i], self.vy[b, i], self.inten[b, i] = x, vx, y, vy, inten
         self.tp[b, i] += 1
         out = (x < -0.5) | (x >= width - 0.5) | (y < -0.5) | (y >= height - 0.5)
         self.e[b, i[out]] = 0
@@ -171,38 +155,13 @@ class NumpyParticleKernels(NumpyPopulationKernels):
     # ------------------------------------------------------------ Eqs. 11–15
 
     def log_weights(self, b: int, psf_sigma: float, noise_sigma: float, z: np.ndarray) -> None:
-        """Eq. 15 for every live particle; ``z`` zero-bordered by PAD pixels, as the kernel reads it."""
-        z = z[PAD:-PAD, PAD:-PAD]
+        """Eq. 15 (``models.point_psf_log_ratio``) for every live E = 1 particle, 0 for E = 0; ``z`` zero-bordered
+        by PAD pixels, as the kernel reads it."""
         i = self.live_slots()
         self.logw[i] = 0.0
         i = i[self.e[b, i] == 1]
-        h, w = z.shape
-        sig = F32(psf_sigma)
-        inv2s2 = F32(1.0) / (F32(2.0) * sig * sig)
-        norm = F32(1.0) / (F32(TWO_PI) * sig * sig)
-        inv_var = F32(1.0) / (F32(noise_sigma) * F32(noise_sigma))
-        x, y = self.x[b, i], self.y[b, i]
-        cx = np.floor(x + F32(0.5)).astype(np.int64)
-        cy = np.floor(y + F32(0.5)).astype(np.int64)
-        k = np.arange(-2, 3)
-        px, py = cx[:, None] + k, cy[:, None] + k
-        step = np.exp(F32(-2.0) * inv2s2)
-        gx = psf_samples((cx - 2).astype(F32) - x, inv2s2, step, px, w)
-        gy = psf_samples((cy - 2).astype(F32) - y, inv2s2, step, py, h)
-        zwin = z[np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]]
-        use = (gy[:, :, None] > 0) & (gx[:, None, :] > 0)
-        sz = np.zeros(len(i), F32)
-        for j in range(5):
-            row = np.zeros(len(i), F32)
-            for kk in range(5):
-                row = row + np.where(use[:, j, kk], gx[:, kk] * zwin[:, j, kk], F32(0))
-            sz = sz + gy[:, j] * row
-        a = self.inten[b, i] * norm
-        sgx = ((((gx[:, 0] * gx[:, 0] + gx[:, 1] * gx[:, 1]) + gx[:, 2] * gx[:, 2]) + gx[:, 3] * gx[:, 3])
-               + gx[:, 4] * gx[:, 4])
-        sgy = ((((gy[:, 0] * gy[:, 0] + gy[:, 1] * gy[:, 1]) + gy[:, 2] * gy[:, 2]) + gy[:, 3] * gy[:, 3])
-               + gy[:, 4] * gy[:, 4])
-        self.logw[i] = (a * sz - F32(0.5) * a * a * sgx * sgy) * inv_var
+        self.logw[i] = models.point_psf_log_ratio(self.x[b, i], self.y[b, i], self.inten[b, i],
+                                                  z[PAD:-PAD, PAD:-PAD], models.psf_constants(psf_sigma, noise_sigma))
 
     def normalise(self, b: int) -> None:
         self.tile_maxima(b)
@@ -372,3 +331,7 @@ class NumpyParticleKernels(NumpyPopulationKernels):
     def load_map(self, off, count, total, pixel, seq, cdf) -> None:
         self.map_off[:], self.map_n[:], self.map_total[:] = off, count, total
         self.map_pixel[:len(pixel)], self.map_seq[:len(seq)], self.map_cdf[:len(cdf)] = pixel, seq, cdf
+
+    def read_seq(self, b, seq) -> None:
+        live = self.seq[b, self.live_slots()]
+        seq[:len(live)] = live  # the front, as the kernel writes it (the step's spare when none is live)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.populations import N_PP_SUMS, P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+from .particles import NumpyParticleKernels
 
 
 def stable_order(keys: np.ndarray) -> np.ndarray:
@@ -105,6 +106,7 @@ class NumpyPopulationKernels:
         self.hand_over(b, drop.astype(np.int8), index, counts, rank, cursor, floats, ints, True)
         outcome[0], outcome[1] = rank, kept
 
-    def read_seq(self, b, seq) -> None:
-        live = self.seq[b, self.live_slots()]
-        seq[:len(live)] = live  # the front, as the kernel writes it (the step's spare when none is live)
+
+class NumpySearchingKernels(NumpyParticleKernels, NumpyPopulationKernels):
+    """Twin of ``kernels.populations.SearchingKernels``: the pool's arrays and steps with Eqs. 37–38
+    (SGDS-PF's ``SearchingPool``)."""

@@ -49,13 +49,15 @@ from ... import backend
 from ...background import DEFAULT_BACKGROUND
 from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
-from ...particles import STATE, ParticlePool
+from ...kernels.particles.layout import STATE
+from ...particles import ParticlePool
 from ...tables import TRACK_DTYPE, make_table
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
                            icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, nearest_pixel,
                            peak_z, PEAK_RHO, scef, update_confidence, windowed_icef, within_duplicate_radius)
 from .params import SGDSParams
 from .populations import eliminated_per_population, resize_population, slab_populations
+from .searching_pool import SearchingPool
 
 MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
@@ -99,8 +101,8 @@ class SGDSPF:
                            bad_pixels=bad_pixels, engine=engine, lef_memory=p.lef_memory, lef_scale=p.lef_scale)
         self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
-        self.search = ParticlePool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
-                                   map_capacity=self.shape[0] * self.shape[1], **common)
+        self.search = SearchingPool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
+                                    map_capacity=self.shape[0] * self.shape[1], **common)
         self.tracks_pool = ParticlePool([p.N_tpf] * max_tracks, self.shape, seed=seed + 7919, **common)
         intensity = (max(p.snr - 2.0, 0.1), p.snr + 3.0)  # Eq. 26 as printed (σ units); see the module notes
         self.search.configure_groups(np.arange(self.grid.n_blocks), "map", pb=p.P_b, pd=p.P_d_search,
@@ -258,7 +260,7 @@ class SGDSPF:
         quotas; the pool eliminates, applies Algorithm 1's potential-target rule (PTp > T_PTp, PE > T_PE
         with PE = ΣE/N_pp, Eq. 38; a potential target near an active track is dropped, the others are handed
         over while tracking PFs are free) and hands over in one launch
-        (``ParticlePool.eliminate_and_hand_over``), so only the handed-over particles' states come to the
+        (``SearchingPool.eliminate_and_hand_over``), so only the handed-over particles' states come to the
         host, PP after PP, each in state order."""
         p, pool = self.p, self.search
         pp_block, inverse, counts = slab_populations(pool.counts, seq)

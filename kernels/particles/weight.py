@@ -1,0 +1,167 @@
+"""Steps 3–4 of the particle filter: log-weights (Eqs. 14–15), their maxima and the segmented, deterministic
+normalisation (Eqs. 16–17: per-tile f64 cumulative sums combined per group in tile order).
+"""
+import taichi as ti
+
+from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
+                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+
+
+@ti.data_oriented
+class WeightMixin:
+    """Steps 3–4 over the pool (Eqs. 14–17)."""
+
+    @ti.func
+    def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, zp: ti.template()):
+        """Step 3, Eq. 15 in the log domain: for E = 1,
+        log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
+        over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
+        The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five samples
+        come from two exponentials by a ratio recurrence (the likelihood model ``self.likelihood``).  ``zp``: the
+        frame with a zero border of PAD pixels (H + 2·PAD, W + 2·PAD)."""
+        inv2s2, norm, inv_var, step = self.likelihood.constants(psf_sigma, noise_sigma)
+        values = (b, inv2s2, norm, inv_var, step)
+        if ti.static(self.flat):
+            self.for_slots(False, self.no_group_values, self.store_log_weight, {'values': values, 'zp': zp})
+            self.tile_maxima(b, False, ())
+        else:  # the tile maxima of step 4 in the same pass (one pass over the pool fewer)
+            self.tile_maxima(b, True, {'values': values, 'zp': zp})
+
+    @ti.func
+    def store_log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
+        """``log_weights`` for slot i, as a ``for_slots`` body."""
+        self.logw[i] = self.log_weight(i, args)
+
+    @ti.func
+    def log_weight(self, i: ti.i32, args: ti.template()) -> ti.f32:
+        """Eq. 15's log-weight of slot i (0 for E = 0); ``args``: {'values': the constants of
+        ``log_weights``, 'zp': the bordered frame} (a dict: a tuple made in a kernel cannot hold an array)."""
+        b, inv2s2, norm, inv_var, step = args['values']
+        zp = ti.static(args['zp'])
+        h, w = ti.static(self.frame_shape)
+        lw = ti.f32(0.0)
+        if self.e[b, i] == 1:
+            lw = self.likelihood.log_ratio(self.x[b, i], self.y[b, i], self.inten[b, i], zp,
+                                           (inv2s2, norm, inv_var, step), h, w)
+        return lw
+
+    @ti.func
+    def tile_maxima(self, b: ti.i32, weigh: ti.template(), args: ti.template()):
+        """Per tile: the largest log-weight, and the largest among E = 1 particles.  ``weigh``: compute
+        and store each log-weight first (``log_weight`` with ``args``), in the same pass."""
+        self.for_tiles(self.tile_maximum, {'b': b, 'weigh': weigh, 'args': args})
+
+    @ti.func
+    def tile_maximum(self, t: ti.i32, loop: ti.template()):
+        """``tile_maxima`` for tile t."""
+        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            if ti.static(loop['weigh']):
+                self.logw[i] = self.log_weight(i, loop['args'])
+            lw = self.logw[i]
+            m = ti.max(m, lw)
+            if self.e[loop['b'], i] == 1:
+                me = ti.max(me, lw)
+        self.tile_max[t] = m
+        self.tile_max_e[t] = me
+
+    @ti.func
+    def group_maxima(self):
+        """Per group: max over its tiles (gmax normalises Eq. 16; gmax_e is the best E = 1 log-weight)."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            self.group_maximum(g)
+
+    @ti.func
+    def group_maximum(self, g: ti.i32):
+        """``group_maxima`` for group g."""
+        m, me = ti.f32(NEG_INF), ti.f32(NEG_INF)
+        for t in range(self.gt0[g], self.gt1[g]):
+            m = ti.max(m, self.tile_max[t])
+            me = ti.max(me, self.tile_max_e[t])
+        self.gmax[g] = m
+        self.gmax_e[g] = me
+
+    @ti.func
+    def tile_cumulative(self):
+        """Eq. 17 within a tile: cum[i] = Σ_{tile start ≤ j ≤ i} exp(logw_j − gmax_g) in f64.  E = 0
+        particles have log-weight 0, so their weight exp(−gmax) is computed once per tile."""
+        self.for_tiles(self.tile_cumulative_sum, ())
+
+    @ti.func
+    def tile_cumulative_sum(self, t: ti.i32, _: ti.template()):
+        """``tile_cumulative`` for tile t."""
+        gmax = ti.cast(self.gmax[self.tile_group[t]], ti.f64)
+        w0 = ti.exp(-gmax)
+        s = ti.cast(0.0, ti.f64)
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            lw = self.logw[i]
+            w = w0
+            if lw != 0.0:
+                w = ti.exp(ti.cast(lw, ti.f64) - gmax)
+            s += w
+            self.cum[i] = s
+        self.tile_total[t] = s
+
+    @ti.func
+    def exclusive_tile_prefix(self, g: ti.i32, totals: ti.template(), prefix: ti.template()) -> ti.f64:
+        """prefix[t] = Σ of group g's tile totals before tile t, added in tile order (f64); returns their sum."""
+        s = ti.cast(0.0, ti.f64)
+        for t in range(self.gt0[g], self.gt1[g]):
+            prefix[t] = s
+            s += totals[t]
+        return s
+
+    @ti.func
+    def group_prefix(self):
+        """Eq. 17 across tiles: exclusive prefix of tile totals per group, and the group total."""
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.off.shape[0]):
+            self.gtotal[g] = self.exclusive_tile_prefix(g, self.tile_total, self.tile_prefix)
+        ti.loop_config(serialize=self.serial)
+        for t in range(self.tile_start.shape[0]):
+            self.add_tile_prefix(t)
+
+    @ti.func
+    def add_tile_prefix(self, t: ti.i32):
+        """Tile t's cumulative weights (Eq. 17 within the tile) become its group's: + the earlier tiles' total."""
+        pre = self.tile_prefix[t]
+        for i in range(self.tile_start[t], self.tile_end(t)):
+            self.cum[i] = self.cum[i] + pre
+
+    @ti.func
+    def group_cumulative(self, g: ti.i32):
+        """``group_prefix`` for group g alone."""
+        self.gtotal[g] = self.exclusive_tile_prefix(g, self.tile_total, self.tile_prefix)
+        for t in range(self.gt0[g], self.gt1[g]):
+            self.add_tile_prefix(t)
+
+    @ti.func
+    def normalise_weights(self):
+        """Step 4 from the tile maxima: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
+        self.group_maxima()
+        self.tile_cumulative()
+        self.group_prefix()
+
+    @ti.kernel
+    def normalise(self, b: ti.i32):
+        """Step 4 alone, on log-weights set from outside."""
+        self.tile_maxima(b, False, ())
+        self.normalise_weights()
+
+    @ti.kernel
+    def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
+              z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """Steps 3–4 in one launch (see ``weigh_particles``)."""
+        self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
+
+    @ti.func
+    def weigh_particles(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.template(),
+                        z: ti.template()):
+        """Steps 3–4 on the normalised frame z (zero-bordered: H + 2·PAD, W + 2·PAD): log-weights
+        (Eq. 15), their normalisation, and each group's largest E = 1 log-weight into ``best``."""
+        self.log_weights(b, psf_sigma, noise_sigma, z)
+        self.normalise_weights()
+        ti.loop_config(serialize=True)
+        for g in range(best.shape[0]):
+            best[g] = self.gmax_e[g]
