@@ -113,26 +113,25 @@ def multi_frame_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, m
 
 
 @ti.kernel
-def accumulate_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, memory_decay: ti.f32,
-                   valid: ti.template(), memory: ti.template(), src: ti.i32, dst: ti.i32, ring: ti.template(),
-                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
-    """One launch of :func:`multi_frame_lef`."""
-    multi_frame_lef(z, zs, d, a, memory_decay, valid, memory, src, dst, ring, n_chunks, r, serial)
+def accumulate_lef(f: ti.template(), zs: ti.i32, src: ti.i32, dst: ti.i32):
+    """One launch of :func:`multi_frame_lef` of frame f.z[zs], memory slot ``src`` → ``dst``, with A and γ
+    from f.params32 (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+    multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, src, dst, f.ring_max, f.n_chunks,
+                    f.r, f.serial)
 
 
 @ti.kernel
-def second_layer_and_lef(acc_max: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32,
-                         acc2: ti.template(), acc2_rows: ti.template(), z_rows: ti.template(), zs: ti.i32,
-                         snr: ti.f64, count: ti.f64, stats: ti.template(), z: ti.template(), d: ti.template(),
-                         lef_a: ti.f32, memory_decay: ti.f32, valid: ti.template(), memory: ti.template(),
-                         ms_src: ti.i32, ms: ti.i32, ring: ti.template(), n_chunks: ti.i32, r: ti.template(),
-                         accumulated: ti.template(), serial: ti.template()):
-    """The frame in slot ``zs``, first half: :func:`second_layer_sum`, :func:`threshold_and_intensity_range`
-    and, with ``accumulated``, :func:`multi_frame_lef` (memory slot ``ms_src`` → ``ms``), in one launch."""
-    second_layer_sum(acc_max, a, b, c, scale, acc2, acc2_rows, serial)
-    threshold_and_intensity_range(acc2_rows, z_rows, zs, snr, count, stats)
+def second_layer_and_lef(f: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, zs: ti.i32,
+                         ms_src: ti.i32, ms: ti.i32, accumulated: ti.template()):
+    """The frame in slot ``zs``, first half: :func:`second_layer_sum` of acc_max slots a, b, c,
+    :func:`threshold_and_intensity_range` and, with ``accumulated``, :func:`multi_frame_lef` (memory slot
+    ``ms_src`` → ``ms``), in one launch; snr and N from f.params64, A and γ from f.params32
+    (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+    second_layer_sum(f.acc_max, a, b, c, scale, f.acc2, f.acc2_rows, f.serial)
+    threshold_and_intensity_range(f.acc2_rows, f.z_rows, zs, f.params64[0], f.params64[1], f.stats)
     if ti.static(accumulated):
-        multi_frame_lef(z, zs, d, lef_a, memory_decay, valid, memory, ms_src, ms, ring, n_chunks, r, serial)
+        multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, ms_src, ms, f.ring_max,
+                        f.n_chunks, f.r, f.serial)
 
 
 # ---------------------------------------------------------------- single operators (tests, figures)

@@ -157,22 +157,21 @@ def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale:
 
 
 @ti.kernel
-def accumulate_max(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, valid: ti.template(),
-                   acc: ti.template(), ds: ti.i32, line: ti.template(), ring: ti.template(), acc_max: ti.template(),
-                   n_chunks: ti.i32, r: ti.template(), serial: ti.template()):
-    """One launch of :func:`first_layer_sum`."""
-    first_layer_sum(src, a, b, c3, scale, valid, acc, ds, line, ring, acc_max, n_chunks, r, serial)
+def accumulate_max(f: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, ds: ti.i32):
+    """One launch of :func:`first_layer_sum`: I_acc of se_max slots a, b, c3 into f.acc[ds], its max filter
+    into f.acc_max[ds] (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+    first_layer_sum(f.se_max, a, b, c3, scale, f.valid, f.acc, ds, f.line, f.ring_max, f.acc_max, f.n_chunks, f.r,
+                    f.serial)
 
 
 @ti.kernel
-def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), z: ti.template(), zs: ti.i32,
-                         z_rows: ti.template(), valid: ti.template(), hs: ti.template(), hm: ti.template(),
-                         line: ti.template(), ring: ti.template(), se_max: ti.template(), n_chunks: ti.i32,
-                         r: ti.template(), i_se: ti.template(), keep_i_se: ti.template(), a: ti.i32, b: ti.i32,
-                         c3: ti.i32, scale: ti.f32, acc: ti.template(), ds: ti.i32, acc_max: ti.template(),
-                         serial: ti.template()):
+def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), f: ti.template(), zs: ti.i32, a: ti.i32,
+                         b: ti.i32, c3: ti.i32, scale: ti.f32, ds: ti.i32, keep_i_se: ti.template()):
     """A new frame into slot ``zs`` (:func:`store_frame`, :func:`energy_and_max`) and the first layer of the
-    frame before it into slot ``ds`` (:func:`first_layer_sum` of se_max slots a, b, c3), in one launch."""
-    store_frame(src, z, zs, z_rows, serial)
-    energy_and_max(z, zs, valid, hs, hm, line, ring, se_max, zs, n_chunks, r, i_se, keep_i_se, serial)
-    first_layer_sum(se_max, a, b, c3, scale, valid, acc, ds, line, ring, acc_max, n_chunks, r, serial)
+    frame before it into slot ``ds`` (:func:`first_layer_sum` of se_max slots a, b, c3), in one launch
+    (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+    store_frame(src, f.z, zs, f.z_rows, f.serial)
+    energy_and_max(f.z, zs, f.valid, f.hs, f.hm, f.line, f.ring_max, f.se_max, zs, f.n_chunks, f.r, f.i_se, keep_i_se,
+                   f.serial)
+    first_layer_sum(f.se_max, a, b, c3, scale, f.valid, f.acc, ds, f.line, f.ring_max, f.acc_max, f.n_chunks, f.r,
+                    f.serial)

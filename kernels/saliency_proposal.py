@@ -192,26 +192,17 @@ def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written
 
 
 @ti.kernel
-def proposal_from_candidates(acc2: ti.template(), acc: ti.template(), acc_max: ti.template(), zs: ti.i32,
-                             z: ti.template(), valid: ti.template(), d: ti.template(), lef_a: ti.f32,
-                             stats: ti.template(), memory: ti.template(), ms: ti.i32, lef_scale: ti.f32,
-                             accumulated: ti.template(), row_x: ti.template(), row_logw: ti.template(),
-                             row_lef: ti.template(), n_row: ti.template(), row_base: ti.template(),
-                             col_block: ti.template(), block_offset: ti.template(), block_nnz: ti.template(),
-                             block_max: ti.template(), entry_pixel: ti.template(), entry_logw: ti.template(),
-                             entry_sal: ti.template(), scratch: ti.template(), block_stats: ti.template(),
-                             proposal: ti.template(), written: ti.template(), n_written: ti.template(),
-                             best: ti.template(), serial: ti.template(),
+def proposal_from_candidates(f: ti.template(), zs: ti.i32, ms: ti.i32, accumulated: ti.template(),
                              proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),
                              best_out: ti.types.ndarray(dtype=ti.f64, ndim=2), reuse: ti.i32):
     """The frame in slot ``zs``, second half: :func:`candidate_pixels`, :func:`proposals_per_block`, and the
     proposal and best list into host arrays (:func:`copy_out_proposal`; with ``reuse``, ``proposal_out``
     holds the last frame's proposal, cleared first by :func:`clear_previous_proposal`), in one launch
     (apart from the first half because one kernel for both compiles much longer for no gain)."""
-    candidate_pixels(acc2, acc, acc_max, zs, z, valid, d, lef_a, stats, memory, ms, lef_scale, accumulated, row_x,
-                     row_logw, row_lef, n_row, serial)
-    clear_previous_proposal(written, n_written, proposal_out, reuse)
-    proposals_per_block(row_x, row_logw, n_row, row_base, col_block, block_offset, block_nnz, block_max,
-                        entry_pixel, entry_logw, entry_sal, scratch, block_stats, proposal, written, n_written,
-                        row_lef, best)
-    copy_out_proposal(proposal, written, n_written, best, proposal_out, best_out)
+    candidate_pixels(f.acc2, f.acc, f.acc_max, zs, f.z, f.valid, f.d, f.params32[0], f.stats, f.memory, ms,
+                     f.params32[2], accumulated, f.row_x, f.row_logw, f.row_lef, f.n_row, f.serial)
+    clear_previous_proposal(f.written, f.n_written, proposal_out, reuse)
+    proposals_per_block(f.row_x, f.row_logw, f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz,
+                        f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch, f.block_stats, f.proposal,
+                        f.written, f.n_written, f.row_lef, f.best)
+    copy_out_proposal(f.proposal, f.written, f.n_written, f.best, proposal_out, best_out)

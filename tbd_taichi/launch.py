@@ -127,7 +127,8 @@ def fields_unchanged(runtime) -> bool:
     ``materialize`` (which every launch calls) would do nothing."""
     builders = runtime.unfinalized_fields_builder
     return (runtime.materialized and not runtime.global_vars and not runtime.matrix_fields and not runtime.grad_vars
-            and not runtime.dual_vars and (not builders or (len(builders) == 1 and INTERNALS.impl._root_fb in builders)))
+            and not runtime.dual_vars
+            and (not builders or (len(builders) == 1 and INTERNALS.impl._root_fb in builders)))
 
 
 class FastKernel:

@@ -216,8 +216,12 @@ class TaichiSaliencyEngine:
         self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
         self.n_chunks = chunk_count(self.shape[0], self.serial, backend.current().arch)
         self.keep_i_se = False  # also store I_se (tests, figures)
-        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks), self._fields)
+        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks, self.serial),
+                                  self._fields)
         f = self.f
+        f.params32[1] = lef_memory  # γ; snr, N and A in second_layer_and_blocks
+        f.params32[2] = lef_scale
+        self.params = None  # (snr, A) last written to f
         backend.from_host(f.valid, valid)
         backend.from_host(f.d, d)
         backend.from_host(f.row_base, grid.row_base)
@@ -232,14 +236,16 @@ class TaichiSaliencyEngine:
 
     def _fields(self):
         """The engine's Taichi fields: ring buffers of 8-lane rows, per-row and per-block scratch."""
-        import types
-
         import taichi as ti
+
+        from .kernels.saliency_fields import SaliencyFields
 
         ks, (h, w), nb = self.ks, self.shape, self.grid.n_blocks
         image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, self.n_lanes))  # noqa: E731
-        f = types.SimpleNamespace(valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes),
-                                  ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
+        f = SaliencyFields(self.r, self.n_chunks, self.serial,
+                           valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes), ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
+        f.z, f.se_max, f.acc, f.acc_max = (f.ring[name] for name in ("z", "se_max", "acc", "acc_max"))
+        f.params64, f.params32 = ti.field(ti.f64, shape=2), ti.field(ti.f32, shape=3)
         rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.n_chunks, depth, self.n_lanes))  # noqa: E731
         f.hs, f.hm, f.ring_max, f.line = rows(2 * self.r + 1), rows(2 * self.r + 1), rows(2 * self.r + 1), rows(1)
         f.i_se, f.acc2 = image(), image()
@@ -271,13 +277,11 @@ class TaichiSaliencyEngine:
         """Frame t into ``slot`` with its I_se_max, and the first layer of frame t − 1 into ``dst`` (as
         :meth:`first_layer`), in one launch; with every slot −1, a first layer of zeros into ``dst``."""
         f = self.f
-        self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f.ring["z"], slot, f.z_rows, f.valid,
-                                     f.hs, f.hm, f.line, f.ring_max, f.ring["se_max"], self.n_chunks, self.r, f.i_se,
-                                     self.keep_i_se, *slots, scale, f.ring["acc"], dst, f.ring["acc_max"], self.serial)
+        self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f, slot, *slots, scale, dst,
+                                     self.keep_i_se)
 
     def first_layer(self, slots, scale: float, dst: int) -> None:
-        self.ks.accumulate_max(self.f.ring["se_max"], *slots, scale, self.f.valid, self.f.ring["acc"], dst, self.f.line,
-                               self.f.ring_max, self.f.ring["acc_max"], self.n_chunks, self.r, self.serial)
+        self.ks.accumulate_max(self.f, *slots, scale, dst)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
         """I_acc2 to the proposal of the frame in ``slot`` in two launches; the proposal comes back as a host
@@ -292,16 +296,11 @@ class TaichiSaliencyEngine:
         if not reuse:
             self.host_proposal = np.zeros(self.shape, np.float32)
         best = np.empty(f.best.shape)
-        ks.second_layer_and_lef(f.ring["acc_max"], *slots, scale, f.acc2, f.acc2_rows, f.z_rows, slot, snr,
-                                float(self.shape[0] * self.shape[1]), f.stats, f.ring["z"], f.d, a, self.lef_memory,
-                                f.valid, f.memory, src, self.memory_slot, f.ring_max, self.n_chunks, self.r,
-                                accumulated, self.serial)
-        ks.proposal_from_candidates(f.acc2, f.ring["acc"], f.ring["acc_max"], slot, f.ring["z"], f.valid, f.d, a,
-                                    f.stats, f.memory, self.memory_slot, self.lef_scale, accumulated, f.row_x,
-                                    f.row_logw, f.row_lef, f.n_row, f.row_base, f.col_block, f.block_offset,
-                                    f.block_nnz, f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch,
-                                    f.block_stats, f.proposal, f.written, f.n_written, f.best, self.serial,
-                                    self.host_proposal, best, int(reuse))
+        if self.params != (snr, a):  # set once per extractor: fields, not launch arguments
+            self.params = (snr, a)
+            f.params64[0], f.params64[1], f.params32[0] = snr, float(self.shape[0] * self.shape[1]), a
+        ks.second_layer_and_lef(f, *slots, scale, slot, src, self.memory_slot, accumulated)
+        ks.proposal_from_candidates(f, slot, self.memory_slot, accumulated, self.host_proposal, best, int(reuse))
         if not details:
             return {"best_lef": best}
         stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)

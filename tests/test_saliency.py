@@ -9,6 +9,7 @@ import taichi as ti
 
 from tbd_taichi import backend, normalize, saliency, simulate
 from tbd_taichi.kernels import saliency as ks
+from tbd_taichi.kernels.saliency_fields import SaliencyFields
 from tbd_taichi.numpy_kernels import saliency as nps
 from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
                                  lane_layout, psf_matrix, saliency_sequence, segmentation_threshold, to_lanes)
@@ -59,11 +60,13 @@ def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
     src, valid, blocks = lane_ring(np.zeros(shape, np.float32))
     acc, dst = lane_out(shape, blocks), lane_out(shape, blocks)
     line, ring = chunk_rings(n_chunks, 2 * r + 1, blocks)
+    fields = SaliencyFields(r, n_chunks, serial, se_max=src, valid=valid, acc=acc, line=line, ring_max=ring,
+                            acc_max=dst)
     size = 2 * r + 1
     for kind in KINDS:
         img = random_image(rng, shape, kind)
         src.from_numpy(to_lanes(img, blocks)[None])
-        ks.accumulate_max(src, 0, -1, -1, 1.0, valid, acc, 0, line, ring, dst, n_chunks, r, serial)
+        ks.accumulate_max(fields, 0, -1, -1, 1.0, 0)
         got = from_lanes(dst.to_numpy()[0], shape[1])
         np.testing.assert_array_equal(from_lanes(acc.to_numpy()[0], shape[1]), img)
         np.testing.assert_array_equal(got, ndi.maximum_filter(img, size=size, mode="nearest"))
@@ -163,8 +166,8 @@ def test_multi_frame_lef_against_scipy_and_twin(rng, shape, chunked, monkeypatch
         z = random_image(rng, shape, KINDS[f % 3]) * (1e-2 if KINDS[f % 3] == "extreme" else 1)
         src, dst = f % 2, 1 - f % 2
         engine.f.ring["z"].from_numpy(np.repeat(to_lanes(z, engine.n_lanes)[None], 3, axis=0))
-        ks.accumulate_lef(engine.f.ring["z"], 0, engine.f.d, A, gamma, engine.f.valid, engine.f.memory, src, dst,
-                          engine.f.ring_max, engine.n_chunks, 1, engine.serial)
+        engine.f.params32[0] = A  # γ is the engine's lef_memory
+        ks.accumulate_lef(engine.f, 0, src, dst)
         got = from_lanes(engine.f.memory.to_numpy()[dst], shape[1])
         twin = nps.accumulate_lef(twin, z, D, A, gamma)
         np.testing.assert_array_equal(got, twin)
@@ -350,3 +353,17 @@ def test_bad_multi_frame_lef_parameters_are_a_clear_error(kw):
 
     with pytest.raises(ParameterError, match="lef_memory must be in"):
         SaliencyExtractor((8, 8), engine="numpy", **kw)
+
+
+def test_saliency_and_background_kernels_take_few_arguments():
+    """Kernels launched every frame take at most 9 arguments: the engine's fields travel as one
+    SaliencyFields template argument, and scalars set once per extractor in its params fields."""
+    import inspect
+
+    from tbd_taichi.kernels import background as kb
+
+    for module in (ks, kb):
+        kernels = {name: k for name, k in vars(module).items() if getattr(k, "_is_wrapped_kernel", False)}
+        assert kernels
+        for name, k in kernels.items():
+            assert len(inspect.signature(k).parameters) <= 9, name
