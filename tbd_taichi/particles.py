@@ -22,6 +22,9 @@ One filter step (:meth:`ParticlePool.step`), for every group at once:
    count, and offspring sit in parent order;
 6. estimates per group (:meth:`ParticlePool.estimates`): Eq. 19 (mean over E = 1
    particles), the existence probability ΣE/n, mean Tp and the positional covariance.
+
+SGDS-PF's particle populations (Eqs. 36–38: elimination, hand-over, the index image) are not part of the
+generic pool: ``tbd_taichi.methods.sgds.searching_pool.SearchingPool`` adds them.
 """
 from __future__ import annotations
 
@@ -32,7 +35,8 @@ import numpy as np
 from . import backend
 from .engines import check_engine
 from .errors import ParameterError
-from .kernels.particles.layout import FLOAT_STATE, INT_STATE, STATE  # noqa: F401  (STATE: re-exported)
+from .kernels.particles.layout import (FLOAT_STATE, INT_STATE, M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY,
+                                      M_EYY, M_N, M_TP, M_X, M_XX, M_XY, M_Y, M_YY, N_MOMENTS, PAD, STATE, TILE)
 
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
@@ -101,8 +105,6 @@ class ParticlePool:
             raise ParameterError(f"every group needs a capacity ≥ 1, got {caps.tolist()}")
         if min(q1, q2) < 0 or psf_sigma <= 0 or noise_sigma <= 0:
             raise ParameterError("q1, q2 must be ≥ 0 and psf_sigma, noise_sigma > 0")
-        from .kernels.particles import TILE
-
         self.engine_name, self.seed = engine, int(seed) & 0xFFFFFFFF
         self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
         self.caps = caps.astype(np.int32)
@@ -348,8 +350,6 @@ class ParticlePool:
 
     def _bordered_frame(self) -> np.ndarray:
         """A zero frame with the kernels' border of PAD pixels, (H + 2·PAD, W + 2·PAD) float32."""
-        from .kernels.particles import PAD
-
         h, w = self.frame_shape
         return np.zeros((h + 2 * PAD, w + 2 * PAD), np.float32)
 
@@ -357,8 +357,6 @@ class ParticlePool:
         """z (H, W) copied into the middle of the bordered frame ``out`` (float32; its border stays 0).
         The weights read the frame through the border, so a 5×5 window at the edge needs no tests;
         one NumPy copy costs a few µs, a kernel loop writing a padded field 0.09 ms at 320×256."""
-        from .kernels.particles import PAD
-
         z = np.asarray(z)
         if z.shape != self.frame_shape:
             raise ParameterError(f"frame has shape {z.shape}; the pool was built for {self.frame_shape}")
@@ -435,8 +433,6 @@ class ParticlePool:
         the same frame, then ``other``'s :meth:`estimates`: the same results as those three calls, in one
         launch where the kernels allow (:meth:`_pairs_with`), so the threads that share this pool's
         groups share ``other``'s as well.  Returns (Seq as :meth:`step` returns it, ``other``'s estimates)."""
-        from .kernels.particles import N_MOMENTS
-
         if not self._pairs_with(other):
             seq = self.step(frame, z, top_up=top_up, seq_out=seq_out)
             other.step(frame, z)
@@ -482,17 +478,12 @@ class ParticlePool:
 
     def estimates(self) -> GroupEstimates:
         """Eq. 19, existence probability, mean Tp and covariances per group (current buffer)."""
-        from .kernels.particles import N_MOMENTS
-
         m = np.empty((self.n_groups, N_MOMENTS))
         self.k.estimates(self.buf, m)
         return self._estimates_from(m)
 
     def _estimates_from(self, m: np.ndarray) -> GroupEstimates:
         """:meth:`estimates` from the kernels' per-group sums ``m`` (G, N_MOMENTS)."""
-        from .kernels.particles import (M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY, M_EYY, M_N, M_TP, M_X,
-                                        M_XX, M_XY, M_Y, M_YY)
-
         n, ne = m[:, M_N], m[:, M_E]
         with np.errstate(invalid="ignore", divide="ignore"):  # the means, NaN where their count is 0
             every = np.where(n[:, None] > 0, m[:, [M_TP, M_X, M_Y, M_XX, M_YY, M_XY]] / n[:, None], np.nan)

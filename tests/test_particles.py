@@ -643,3 +643,33 @@ def test_keep_removes_particles_in_place_and_in_order(rng, engine):
         np.testing.assert_array_equal(after[key], before[key][keep], err_msg=key)
     with pytest.raises(ParameterError, match="keep flag"):
         pool.keep(np.ones(3, bool))
+
+
+def test_numpy_models_are_the_pools_motion_and_likelihood():
+    """numpy_kernels.models: NCV without noise is constant velocity with the intensity floored, and the point-PSF
+    log-ratio of a particle on an empty frame is −½a²Σgx²Σgy²/σ² < 0, larger on a bright pixel under it."""
+    from tbd_taichi.numpy_kernels import models
+
+    f32 = np.float32
+    zero = (np.zeros(2, f32),) * 5
+    x, vx, y, vy, inten = models.ncv_step(np.array([1, 2], f32), np.array([0.5, -1], f32), np.array([3, 4], f32),
+                                          np.array([0.25, 0], f32), np.array([0.05, 2], f32), zero,
+                                          models.ncv_noise_factors(0.001, 0.01), 0.1)
+    np.testing.assert_array_equal(x, [1.5, 1]), np.testing.assert_array_equal(y, [3.25, 4])
+    np.testing.assert_array_equal(vx, [0.5, -1]), np.testing.assert_array_equal(inten, f32([0.1, 2]))
+    z = np.zeros((9, 9), f32)
+    consts = models.psf_constants(0.7, 1.0)
+    dark = models.point_psf_log_ratio(np.array([4.0], f32), np.array([4.0], f32), np.array([5.0], f32), z, consts)
+    z[4, 4] = 3.0
+    bright = models.point_psf_log_ratio(np.array([4.0], f32), np.array([4.0], f32), np.array([5.0], f32), z, consts)
+    assert dark[0] < 0 < bright[0]
+
+
+def test_generic_pool_has_no_population_kernels():
+    """The generic pool and its kernels carry no SGDS-PF population logic (SearchingPool adds it)."""
+    from tbd_taichi.methods.sgds.searching_pool import SearchingPool
+
+    pool = ParticlePool([10], SHAPE, engine="numpy")
+    assert not hasattr(pool, "eliminate") and not hasattr(pool.k, "eliminate")
+    searching = SearchingPool([10], SHAPE, engine="numpy")
+    assert hasattr(searching, "eliminate_and_hand_over") and hasattr(searching.k, "eliminate_and_hand_over")

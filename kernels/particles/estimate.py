@@ -3,8 +3,7 @@ particles and of the E = 1 particles), added deterministically (tiles serially, 
 """
 import taichi as ti
 
-from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
-                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+from .layout import N_MOMENTS
 
 
 @ti.data_oriented

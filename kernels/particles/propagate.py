@@ -3,9 +3,8 @@ of Eq. 35) and propagation of existing particles (Eqs. 9–10).
 """
 import taichi as ti
 
-from ..rng import exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at  # noqa: F401
-from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
-                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+from ..rng import key_prefix, normal_at, uniform_at, uniform_f64_at
+from .layout import BIRTH_STREAMS, COPY_TRIES, NOISE_STREAMS, S_EXIST, TWO_PI
 
 
 @ti.data_oriented
@@ -131,7 +130,8 @@ class PropagateMixin:
                   width: ti.i32, height: ti.i32):
         """Step 2 for existing particles (E 1 → 1, and copied newborns of kind 2), Eqs. 9–10: NCV plus
         Cholesky-factored noise of Q (Eq. 46, T = 1), I ← max(I + √q2·n, i_floor) (the motion model
-        ``self.motion``), Tp ← Tp + 1.  A particle whose position leaves the image (x ∉ [−½, W−½)) gets E = 0."""
+        ``self.motion``), Tp ← Tp + 1.  A particle whose position leaves the image (x ∉ [−½, W−½))
+        gets E = 0."""
         c11, c21, c22, sq2 = self.motion.noise_factors(q1, q2)
         keys = [key_prefix(seed, frame, st) for st in ti.static(NOISE_STREAMS)]
         self.for_slots(False, self.copies_newborns, self.propagate_slot,

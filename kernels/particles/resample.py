@@ -3,9 +3,8 @@ with the parents found by interleaved merge walks and the states gathered into t
 """
 import taichi as ti
 
-from ..rng import exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at  # noqa: F401
-from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
-                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+from ..rng import exponential_at, key_prefix, uniform_f64_at
+from .layout import S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, WALKS
 
 
 @ti.data_oriented

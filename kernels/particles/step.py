@@ -3,14 +3,14 @@ three passes over the tiles) and ``step_pair`` (two pools on one frame, ``steppe
 """
 import taichi as ti
 
-from ..rng import exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at  # noqa: F401
-from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
-                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+from ..rng import key_prefix
+from .layout import BIRTH_STREAMS, NOISE_STREAMS, S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC
 
 
 @ti.data_oriented
 class StepMixin:
-    """The fused steps, composed of the stages of ``PropagateMixin``, ``WeightMixin``, ``ResampleMixin`` and ``EstimateMixin``."""
+    """The fused steps, composed of the stages of ``PropagateMixin``, ``WeightMixin``, ``ResampleMixin`` and
+    ``EstimateMixin``."""
 
     @ti.kernel
     def step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),

@@ -3,8 +3,7 @@ normalisation (Eqs. 16–17: per-tile f64 cumulative sums combined per group in 
 """
 import taichi as ti
 
-from .layout import (BIRTH_STREAMS, COPY_TRIES, N_MOMENTS, NEG_INF, NOISE_STREAMS, PAD, S_BIRTH_MU,  # noqa: F401
-                     S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, TILE, TWO_PI, WALKS)
+from .layout import NEG_INF
 
 
 @ti.data_oriented
