@@ -1,5 +1,4 @@
 """Saliency kernels (Eqs. 20–33): Taichi against the NumPy twin, and both against trusted libraries."""
-import math
 
 import cv2
 import numpy as np

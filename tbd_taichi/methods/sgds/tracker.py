@@ -16,25 +16,15 @@ Per processed frame f (two frames behind the input, because of the saliency accu
    ICEF (Eq. 40) and SCEF (Eqs. 41–42) (Eq. 43).  C < T_ft ends the track; N_rt > T_rt
    (frames with C = 1) confirms it.
 
-Choices where the paper is open (see the README for the reasons): the intensity range of
-newborns is Eq. 26's [snr − 2, snr + 3] in σ units of the PSF peak, converted to total
-intensity (×2πΣ²) like the original PF; PE = ΣE/N_pp (the fraction of the PP's particles
-with E = 1); SCEF uses dev_d = √((var_x + var_y)/2 + |cov_xy|) and SCEF = T_devr/max(dev)
-when spread (the printed √cov can be imaginary), over the tracking PF's E = 1 particles: E = 0
-particles are not propagated, so their positions are where each died, up to tens of frames behind
-a moving target, and at low SNR (where resampling keeps them) they spread the cloud and end the
-target's track (200×200, SNR 1.2, seeds 0–39: TSR 0.65 → 0.83 against all particles); ICEF is also 1 when MTW/MSW's geometric mean
-over the track's last ``icef_window`` frames is ≥ ``icef_mean_ratio``, scaled to the frame area
-(not in the paper, :func:`windowed_icef`, ``SGDSParams.icef_ratio_for``); a track is also confirmed once its cloud
-has been compact for ``confirm_window`` frames with MTW/MSW's geometric mean ≥ ``confirm_mean_ratio`` (not in the
-paper, :func:`held_compact`); Eq. 29's weight is the multi-frame
-LEF (``lef_memory``, ``lef_scale``) and Eq. 40's MSW the best untracked candidate's LEF (``msw_reference``,
-:func:`msw_from_candidates`), both not in the paper (``PAPER_SALIENCY`` restores them); a track also ends when its estimate
-leaves the image or it has had no E = 1 particle for 3 frames; saliency within 2 px of an
-active track is masked and a potential target within 2 px of a track is dropped, so one
-target gives one track; of two tracks closer than 2 px the younger one is removed; a track handed over at
-frame f starts its path with the PP's Eq. 38 estimate at f and its tracking PF first steps at f + 1 (the PP's
-particles have weighed frame f already; the paper does not say, the implementation notes suggest it).
+Where the paper is open or departs, the choices (each a parameter where it can be, with the paper's value
+available) are listed with their reasons and measured effects in docs/methods/sgds.md: Eq. 26's newborn
+intensities, PE = ΣE/N_pp, SCEF's sound reading over the E = 1 particles (:func:`~.confirmation.scef`), the ICEF
+window and the long-window confirmation (:func:`~.confirmation.windowed_icef`, :func:`~.confirmation.held_compact`),
+the multi-frame LEF and the MSW from candidates (``PAPER_SALIENCY`` restores Eqs. 29 and 40 as printed), the
+ends of a track (out of the image, 3 frames without an E = 1 particle), one track per target (saliency masked
+and potential targets dropped within 2 px of a track, the younger of two close tracks removed), and the
+hand-over timing (a PP handed over at frame f starts its track with its Eq. 38 estimate at f; its tracking PF
+first steps at f + 1).
 """
 from __future__ import annotations
 
