@@ -23,3 +23,4 @@ def mount_kernels() -> None:
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
+    setattr(sys.modules[PACKAGE], "kernels", module)  # as an import of the subpackage would
