@@ -208,7 +208,7 @@ def test_adding_a_method_walkthrough_runs(capsys):
         assert "bootstrap" in methods.names()
         out = capsys.readouterr().out
         dsr = float(re.search(r"bootstrap PF: DSR ([0-9.]+)", out).group(1))
-        assert dsr >= 0.6, out  # SNR 3, 40 frames: a bootstrap PF holds the target most of the time
+        assert dsr >= 0.6, out  # SNR 3, 60 frames: 0.9 measured (0.65-0.9 over scene seeds 2-4); a miss gives < 0.2
         assert "bootstrap PF parameter declare = 1.5 must be in (0, 1)" in out
         assert cli.main(["track", "--method", "bootstrap", "--help-params"]) == 0
         assert re.search(r"^n_particles\s+20000\s+particles", capsys.readouterr().out, re.M)
