@@ -78,9 +78,8 @@ def parse_init_box(text: str | None):
     """``--init-box X,Y,W,H`` as four floats (checked against the method and frame by the registry)."""
     if text is None:
         return None
-    parts = [p for p in text.split(",")]
     try:
-        box = tuple(float(p) for p in parts)
+        box = tuple(float(p) for p in text.split(","))
     except ValueError:
         box = ()
     if len(box) != 4:
@@ -117,9 +116,10 @@ def method_settings(args, spec) -> dict:
         chosen["background"] = args.background
     switches = {"--paths online": args.paths == "online", "--frontend-process": args.frontend_process,
                 "--paper-saliency": args.paper_saliency}
-    needs = {"--paths online": "history", "--frontend-process": "frontend_process", "--paper-saliency": "lef_memory"}
+    needs = {"--paths online": {"history"}, "--frontend-process": {"frontend_process"},
+             "--paper-saliency": set(PAPER_SALIENCY)}
     for flag, on in switches.items():
-        if on and needs[flag] not in declared:
+        if on and not needs[flag] <= declared:
             raise TBDError(f"{flag} applies to --method sgds only")
     if args.paths == "online":
         chosen["history"] = False  # rows go to the CSV as they come: constant memory

@@ -16,6 +16,7 @@ import pkgutil
 
 import numpy as np
 
+from ..engines import check_engine
 from ..errors import ParameterError
 from .registry import KINDS, MethodSpec, ParamInfo, Tracker, param
 
@@ -117,8 +118,7 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     spec = get(name)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed must be a whole number ≥ 0, got {seed!r}")
-    if engine not in ("taichi", "numpy"):
-        raise ParameterError(f"engine must be one of taichi, numpy, got {engine!r}")
+    check_engine(engine)
     if len(tuple(shape)) != 2:
         raise ParameterError(f"shape must be (H, W), got {shape!r}")
     shape = (int(shape[0]), int(shape[1]))
