@@ -24,6 +24,7 @@ from .particles import ParticleKernels
 # columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
 P_KEPT, P_KEPT_E, P_TP, P_X, P_Y = range(5)
 N_PP_SUMS = 5
+RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, T, then the T tracked (x, y)
 
 
 @ti.data_oriented
@@ -113,19 +114,26 @@ class PopulationKernels:
         return (ti.cast(self.pp_size[self.state_pp[s]], ti.i64) << 32) + s
 
     @ti.kernel
-    def hand_over(self, b: ti.i32, drop: ti.types.ndarray(dtype=ti.i8, ndim=1),
-                  index: ti.types.ndarray(dtype=ti.i32, ndim=2), counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  rank: ti.types.ndarray(dtype=ti.i32, ndim=1), cursor: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    def hand_over(self, b: ti.i32, index: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                  counts: ti.types.ndarray(dtype=ti.i32, ndim=1), decisions: ti.types.ndarray(dtype=ti.i32, ndim=2),
                   floats: ti.types.ndarray(dtype=ti.f32, ndim=2), ints: ti.types.ndarray(dtype=ti.i32, ndim=2),
                   members: ti.template()):
-        """After :meth:`eliminate`: the particles of dropped PPs (drop[k] ≠ 0) go too; the index image
-        P_pp (Eq. 36): each pixel holds the Seq of the kept particles (Seq > 0) in it, those of the
-        larger PP winning, then the later in state order; the kept particles move to the front of
-        their slabs, and ``counts`` receives every group's new live count.  With ``members``, the
-        survivors of elimination in each PP k with rank[k] = r ≥ 0 (the handed-over PPs) are first
-        copied out, in state order from column cursor[r] on (the host sets each PP's first column):
-        rows x, vx, y, vy, I of ``floats`` and E, Tp, Seq of ``ints``, as ``read_slots`` gives them."""
-        self.hand_over_particles(b, drop, index, counts, ti.static((rank, cursor, floats, ints)), members)
+        """After :meth:`eliminate`: the particles of dropped PPs go too; the index image P_pp (Eq. 36): each
+        pixel holds the Seq of the kept particles (Seq > 0) in it, those of the larger PP winning, then the
+        later in state order; the kept particles move to the front of their slabs, and ``counts`` receives
+        every group's new live count.  ``decisions`` (3, PPs), the host's choices as
+        :meth:`potential_targets` makes them on the device: per PP k its drop flag (row 0) and hand-over
+        rank (row 1; −1: not handed over), per rank r the first member column of that PP (row 2).  With
+        ``members``, the survivors of elimination in each handed-over PP are first copied out, in state
+        order from its first column on: rows x, vx, y, vy, I of ``floats`` and E, Tp, Seq of ``ints``, as
+        ``read_slots`` gives them."""
+        ti.loop_config(serialize=True)
+        for k in range(decisions.shape[1]):
+            self.pp_drop[k] = ti.cast(decisions[0, k], ti.i8)
+            self.pp_rank[k] = decisions[1, k]
+            self.pp_cursor[k] = decisions[2, k]
+        self.hand_over_particles(b, self.pp_drop, index, counts, ti.static((self.pp_rank, self.pp_cursor, floats,
+                                                                            ints)), members)
 
     @ti.func
     def hand_over_particles(self, b: ti.i32, drop: ti.template(), index: ti.template(), counts: ti.template(),
@@ -152,24 +160,24 @@ class PopulationKernels:
     def eliminate_and_hand_over(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
                                 table: ti.types.ndarray(dtype=ti.f64, ndim=2),
                                 rule: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                                tracked: ti.types.ndarray(dtype=ti.f64, ndim=2),
                                 index: ti.types.ndarray(dtype=ti.i32, ndim=2),
                                 counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
                                 outcome: ti.types.ndarray(dtype=ti.i32, ndim=2),
                                 floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
                                 ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         """:meth:`eliminate`, the potential-target decisions (:meth:`potential_targets`) and :meth:`hand_over`
-        with members in one launch.  ``rule``: (T_PTp, T_PE, squared duplicate radius in px², most PPs to hand
-        over, active tracks); ``tracked``: their positions, rows (x, y) in px.  ``outcome``: per PP k its
-        hand-over rank (row 0; −1: not handed over) and its survivors of elimination (row 1); the handed PPs'
-        survivors fill ``floats`` and ``ints`` in rank order, as ``hand_over`` writes them."""
+        with members in one launch.  ``rule``: T_PTp, T_PE, the squared duplicate radius in px², the most PPs
+        to hand over, the number T of active tracks, then their positions x₀, y₀, …, x_T−1, y_T−1 in px
+        (``RULE_TRACKED`` on).  ``outcome``: per PP k its hand-over rank (row 0; −1: not handed over) and its
+        survivors of elimination (row 1); the handed PPs' survivors fill ``floats`` and ``ints`` in rank
+        order, as ``hand_over`` writes them."""
         self.eliminate_particles(b, table, ti.static((pp,)))
-        self.potential_targets(table.shape[1], rule, tracked, outcome)
+        self.potential_targets(table.shape[1], rule, outcome)
         self.hand_over_particles(b, self.pp_drop, index, counts,
                                  ti.static((self.pp_rank, self.pp_cursor, floats, ints)), True)
 
     @ti.func
-    def potential_targets(self, n_pp: ti.i32, rule: ti.template(), tracked: ti.template(), outcome: ti.template()):
+    def potential_targets(self, n_pp: ti.i32, rule: ti.template(), outcome: ti.template()):
         """Algorithm 1's hand-over decisions from Eq. 38's sums (``pp_sums``), PP after PP in PP order: a PP with
         survivors, E = 1 among them, PTp = ΣTp/N_pp > T_PTp and PE = ΣE/N_pp > T_PE is a potential target.  It
         is dropped if its mean position (E = 1 survivors, px) lies within the duplicate radius of an active
@@ -187,7 +195,8 @@ class PopulationKernels:
                     px, py = self.pp_sums[k, P_X] / ne, self.pp_sums[k, P_Y] / ne
                     near = 0
                     for j in range(n_tracked):
-                        dx, dy = px - tracked[j, 0], py - tracked[j, 1]
+                        dx = px - rule[RULE_TRACKED + 2 * j]
+                        dy = py - rule[RULE_TRACKED + 2 * j + 1]
                         if dx * dx + dy * dy < r2:
                             near = 1
                     if near:  # tracked already

@@ -3,6 +3,7 @@
 A kernel taking ``f: ti.template()`` reads ``f.z``, ``f.valid`` … at compile time, so grouping changes
 neither the compiled code's work nor its results, only how many arguments a launch sets.
 """
+import numpy as np
 
 
 class SaliencyFields:
@@ -15,3 +16,13 @@ class SaliencyFields:
     def __init__(self, r: int, n_chunks: int, serial: bool, **fields):
         self.r, self.n_chunks, self.serial = int(r), int(n_chunks), bool(serial)
         self.__dict__.update(fields)
+
+
+# the ring slots a launch works on, one i32 array (``ring_slots``): the frame's slot, the three slots whose images
+# are summed (−1: none), the destination slot of a sum, the multi-frame LEF's source and destination memory slots
+R_FRAME, R_SUM_A, R_SUM_B, R_SUM_C, R_DST, R_MEMORY_SRC, R_MEMORY = range(7)
+
+
+def ring_slots(frame: int = 0, sums=(-1, -1, -1), dst: int = 0, memory=(0, 0)):
+    """The ``R_*`` slots of a launch as the kernels read them (int32 array)."""
+    return np.array([frame, *sums, dst, *memory], np.int32)

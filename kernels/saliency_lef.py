@@ -6,6 +6,7 @@ The 5×5 correlation of Eq. 27 reads 0 outside the image.
 import taichi as ti
 
 from .loops import thread_span
+from .saliency_fields import R_FRAME, R_MEMORY, R_MEMORY_SRC, R_SUM_A, R_SUM_B, R_SUM_C
 from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_rows, frame_vector,
                              lane_shift, store_row_moments, sum_of_slots)
 from .saliency_maxfilter import column_max, row_max
@@ -121,17 +122,18 @@ def accumulate_lef(f: ti.template(), zs: ti.i32, src: ti.i32, dst: ti.i32):
 
 
 @ti.kernel
-def second_layer_and_lef(f: ti.template(), a: ti.i32, b: ti.i32, c: ti.i32, scale: ti.f32, zs: ti.i32,
-                         ms_src: ti.i32, ms: ti.i32, accumulated: ti.template()):
-    """The frame in slot ``zs``, first half: :func:`second_layer_sum` of acc_max slots a, b, c,
+def second_layer_and_lef(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32,
+                         accumulated: ti.template()):
+    """The frame in slot ring[R_FRAME], first half: :func:`second_layer_sum` of acc_max slots ring[R_SUM_*],
     :func:`threshold_and_intensity_range` and, with ``accumulated``, :func:`multi_frame_lef` (memory slot
-    ``ms_src`` → ``ms``), in one launch; snr and N from f.params64, A and γ from f.params32
-    (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+    ring[R_MEMORY_SRC] → ring[R_MEMORY]), in one launch; snr and N from f.params64, A and γ from f.params32
+    (``f``: :class:`~.saliency_fields.SaliencyFields`; ``ring``: :func:`~.saliency_fields.ring_slots`)."""
+    zs, a, b, c = ring[R_FRAME], ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C]
     second_layer_sum(f.acc_max, a, b, c, scale, f.acc2, f.acc2_rows, f.serial)
     threshold_and_intensity_range(f.acc2_rows, f.z_rows, zs, f.params64[0], f.params64[1], f.stats)
     if ti.static(accumulated):
-        multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, ms_src, ms, f.ring_max,
-                        f.n_chunks, f.r, f.serial)
+        multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, ring[R_MEMORY_SRC],
+                        ring[R_MEMORY], f.ring_max, f.n_chunks, f.r, f.serial)
 
 
 # ---------------------------------------------------------------- single operators (tests, figures)

@@ -9,6 +9,7 @@ pixels are ignored by the max filters and contribute 0 to the energy sum of Eq. 
 import taichi as ti
 
 from .loops import thread_span
+from .saliency_fields import R_DST, R_FRAME, R_SUM_A, R_SUM_B, R_SUM_C
 from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_rows, lane_shift,
                              positive_row_vector, row_vector, store_row_moments, sum_of_slots)
 
@@ -157,21 +158,23 @@ def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale:
 
 
 @ti.kernel
-def accumulate_max(f: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale: ti.f32, ds: ti.i32):
-    """One launch of :func:`first_layer_sum`: I_acc of se_max slots a, b, c3 into f.acc[ds], its max filter
-    into f.acc_max[ds] (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
-    first_layer_sum(f.se_max, a, b, c3, scale, f.valid, f.acc, ds, f.line, f.ring_max, f.acc_max, f.n_chunks, f.r,
-                    f.serial)
+def accumulate_max(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32):
+    """One launch of :func:`first_layer_sum`: I_acc of se_max slots ring[R_SUM_*] into f.acc[ring[R_DST]], its max
+    filter into f.acc_max[ring[R_DST]] (``f``: :class:`~.saliency_fields.SaliencyFields`; ``ring``:
+    :func:`~.saliency_fields.ring_slots`)."""
+    first_layer_sum(f.se_max, ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C], scale, f.valid, f.acc, ring[R_DST],
+                    f.line, f.ring_max, f.acc_max, f.n_chunks, f.r, f.serial)
 
 
 @ti.kernel
-def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), f: ti.template(), zs: ti.i32, a: ti.i32,
-                         b: ti.i32, c3: ti.i32, scale: ti.f32, ds: ti.i32, keep_i_se: ti.template()):
-    """A new frame into slot ``zs`` (:func:`store_frame`, :func:`energy_and_max`) and the first layer of the
-    frame before it into slot ``ds`` (:func:`first_layer_sum` of se_max slots a, b, c3), in one launch
-    (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
+def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), f: ti.template(),
+                         ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32, keep_i_se: ti.template()):
+    """A new frame into slot ring[R_FRAME] (:func:`store_frame`, :func:`energy_and_max`) and the first layer of
+    the frame before it into slot ring[R_DST] (:func:`first_layer_sum` of se_max slots ring[R_SUM_*]), in one
+    launch (``f``: :class:`~.saliency_fields.SaliencyFields`; ``ring``: :func:`~.saliency_fields.ring_slots`)."""
+    zs = ring[R_FRAME]
     store_frame(src, f.z, zs, f.z_rows, f.serial)
     energy_and_max(f.z, zs, f.valid, f.hs, f.hm, f.line, f.ring_max, f.se_max, zs, f.n_chunks, f.r, f.i_se, keep_i_se,
                    f.serial)
-    first_layer_sum(f.se_max, a, b, c3, scale, f.valid, f.acc, ds, f.line, f.ring_max, f.acc_max, f.n_chunks, f.r,
-                    f.serial)
+    first_layer_sum(f.se_max, ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C], scale, f.valid, f.acc, ring[R_DST],
+                    f.line, f.ring_max, f.acc_max, f.n_chunks, f.r, f.serial)

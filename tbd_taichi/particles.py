@@ -35,8 +35,9 @@ import numpy as np
 from . import backend
 from .engines import check_engine
 from .errors import ParameterError
-from .kernels.particles.layout import (FLOAT_STATE, INT_STATE, M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY,
-                                      M_EYY, M_N, M_TP, M_X, M_XX, M_XY, M_Y, M_YY, N_MOMENTS, PAD, STATE, TILE)
+from .kernels.particles.layout import (FLOAT_STATE, INT_STATE, M_BEST, M_E, M_EI, M_EVX, M_EVY, M_EX, M_EXX, M_EXY, M_EY,
+                                      M_EYY, M_N, M_TP, M_X, M_XX, M_XY, M_Y, M_YY, N_ESTIMATES, PAD, STATE, TILE)
+from .kernels.particles.step import StepOptions
 
 BIRTH_KINDS = {"uniform": 0, "map": 1, "copy": 2}
 GROUP_PARAMS = ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax")
@@ -143,7 +144,10 @@ class ParticlePool:
         self._put("gt1", gt1)
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
-        self._best = np.zeros(self.n_groups, np.float32)  # largest E = 1 log-weight per group, from weigh
+        self._put("best_e", np.zeros(self.n_groups, np.float32))  # largest E = 1 log-weight per group, from weigh
+        # C_* (f64 here: the Taichi field rounds to f32 as a scalar argument would, the NumPy twin keeps them)
+        self._put("constants", np.array([q1, q2, intensity_floor, psf_sigma, noise_sigma], np.float64))
+        self._put("seed_key", np.array([self.seed], np.uint32))
         self._no_seq = np.zeros(1, np.int32)  # step's Seq output when none is read
         self._z = self._bordered_frame()  # the normalised frame weigh reads, zero-bordered
         self._step_z = self._bordered_frame()  # step's copy of its frame
@@ -253,7 +257,7 @@ class ParticlePool:
 
     def max_log_weights(self) -> np.ndarray:
         """Per group, the largest log-weight of an E = 1 particle in the last :meth:`weigh` (−3e38: none)."""
-        return self._best.astype(np.float64)
+        return self._get("best_e").astype(np.float64)
 
     # ------------------------------------------------------------ state
 
@@ -374,8 +378,7 @@ class ParticlePool:
         ``top_up`` (optional counts per group) grows the groups after the existence step; the
         added slots become initial particles, drawn in the same launch as the newborns (Eq. 35)."""
         counts = self._topped_up(top_up)
-        h, w = self.frame_shape
-        self.k.predict(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h)
+        self.k.predict(frame, self.buf, counts)
         self.counts = counts
 
     def _topped_up(self, top_up) -> np.ndarray:
@@ -386,7 +389,7 @@ class ParticlePool:
 
     def weigh(self) -> None:
         """Steps 3–4: log-weights (Eq. 15) and the segmented normalisation (Eqs. 16–17)."""
-        self.k.weigh(self.buf, self.psf_sigma, self.noise_sigma, self._best, self._z)
+        self.k.weigh(self.buf, self._z)
 
     def normalise(self) -> None:
         """Step 4 on the current log-weights: per-group maxima and f64 cumulative sums (Eqs. 16–17)."""
@@ -402,7 +405,7 @@ class ParticlePool:
     def resample(self, frame: int, n_out=None, systematic: bool = False) -> None:
         """Step 5 (Eqs. 17–18): each group draws ``n_out[g]`` particles (default: its live count)."""
         n_out = self._resampled_counts(n_out)
-        self.k.resample(self.seed, frame, self.buf, n_out, bool(systematic))
+        self.k.resample(frame, self.buf, n_out, bool(systematic))
         self.buf = 1 - self.buf
         self.counts = n_out
 
@@ -417,12 +420,9 @@ class ParticlePool:
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(n_out, counts)
         seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
-        h, w = self.frame_shape
         # an empty seq travels as the 1-element spare (nothing is written): one compiled variant per use
-        self.k.step(self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor, w, h,
-                    self.psf_sigma, self.noise_sigma, self._best, z, n_out, bool(systematic),
-                    seq if seq is not None and len(seq) else self._no_seq, seq is not None,
-                    self._fused_step())
+        self.k.step(frame, self.buf, counts, n_out, z, seq if seq is not None and len(seq) else self._no_seq,
+                    StepOptions.of(systematic, seq is not None, self._fused_step()))
         self.buf = 1 - self.buf
         self.counts = n_out
         return seq
@@ -441,14 +441,11 @@ class ParticlePool:
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(None, counts)
         seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
-        other_n_out = other._resampled_counts(None)
-        moments = np.empty((other.n_groups, N_MOMENTS))
-        h, w = self.frame_shape
-        self.k.step_pair(other.k._target, self.seed, frame, self.buf, counts, self.q1, self.q2, self.intensity_floor,
-                         w, h, self.psf_sigma, self.noise_sigma, self._best, z, n_out, False,
-                         seq if seq is not None and len(seq) else self._no_seq, seq is not None,
-                         other.seed, other.buf, other.counts, other._best, other_n_out, moments)
-        for pool, out in ((self, n_out), (other, other_n_out)):
+        moments = np.empty((other.n_groups, N_ESTIMATES))
+        # other steps at its live counts, which its kernels hold (``n``) as every launch that changes them sets them
+        self.k.step_pair(other.k._target, frame, self.buf, other.buf, n_out, z,
+                         seq if seq is not None and len(seq) else self._no_seq, seq is not None, moments)
+        for pool, out in ((self, n_out), (other, other.counts)):
             pool.buf, pool.counts = 1 - pool.buf, out
         return seq, other._estimates_from(moments)
 
@@ -478,12 +475,12 @@ class ParticlePool:
 
     def estimates(self) -> GroupEstimates:
         """Eq. 19, existence probability, mean Tp and covariances per group (current buffer)."""
-        m = np.empty((self.n_groups, N_MOMENTS))
+        m = np.empty((self.n_groups, N_ESTIMATES))
         self.k.estimates(self.buf, m)
         return self._estimates_from(m)
 
     def _estimates_from(self, m: np.ndarray) -> GroupEstimates:
-        """:meth:`estimates` from the kernels' per-group sums ``m`` (G, N_MOMENTS)."""
+        """:meth:`estimates` from the kernels' per-group sums ``m`` (G, N_ESTIMATES)."""
         n, ne = m[:, M_N], m[:, M_E]
         with np.errstate(invalid="ignore", divide="ignore"):  # the means, NaN where their count is 0
             every = np.where(n[:, None] > 0, m[:, [M_TP, M_X, M_Y, M_XX, M_YY, M_XY]] / n[:, None], np.nan)
@@ -491,4 +488,4 @@ class ParticlePool:
                             np.nan)
         return GroupEstimates(n.astype(np.int64), np.where(n > 0, ne / np.maximum(n, 1), 0.0), *live[:, :5].T,
                               every[:, 0], covariance_from_means(every[:, 1:]),
-                              covariance_from_means(live[:, [0, 2, 5, 6, 7]]), self.max_log_weights())
+                              covariance_from_means(live[:, [0, 2, 5, 6, 7]]), m[:, M_BEST].copy())

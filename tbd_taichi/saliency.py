@@ -32,6 +32,7 @@ from . import backend
 from .engines import check_engine
 from .errors import ParameterError
 from .io import stream_frame
+from .kernels.saliency_fields import ring_slots
 from .numpy_kernels import saliency as nps
 
 BEST_K = 32  # candidates with the largest Eq. 28 LEF reported per frame (ICEF's MSW skips those at tracks)
@@ -277,11 +278,11 @@ class TaichiSaliencyEngine:
         """Frame t into ``slot`` with its I_se_max, and the first layer of frame t − 1 into ``dst`` (as
         :meth:`first_layer`), in one launch; with every slot −1, a first layer of zeros into ``dst``."""
         f = self.f
-        self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f, slot, *slots, scale, dst,
-                                     self.keep_i_se)
+        self.ks.frame_to_first_layer(to_lanes(z, self.n_lanes, self.host_lanes), f,
+                                     ring_slots(frame=slot, sums=slots, dst=dst), scale, self.keep_i_se)
 
     def first_layer(self, slots, scale: float, dst: int) -> None:
-        self.ks.accumulate_max(self.f, *slots, scale, dst)
+        self.ks.accumulate_max(self.f, ring_slots(sums=slots, dst=dst), scale)
 
     def second_layer_and_blocks(self, slots, scale: float, slot: int, snr: float, a: float, details: bool) -> dict:
         """I_acc2 to the proposal of the frame in ``slot`` in two launches; the proposal comes back as a host
@@ -299,7 +300,8 @@ class TaichiSaliencyEngine:
         if self.params != (snr, a):  # set once per extractor: fields, not launch arguments
             self.params = (snr, a)
             f.params64[0], f.params64[1], f.params32[0] = snr, float(self.shape[0] * self.shape[1]), a
-        ks.second_layer_and_lef(f, *slots, scale, slot, src, self.memory_slot, accumulated)
+        ks.second_layer_and_lef(f, ring_slots(frame=slot, sums=slots, memory=(src, self.memory_slot)), scale,
+                                accumulated)
         ks.proposal_from_candidates(f, slot, self.memory_slot, accumulated, self.host_proposal, best, int(reuse))
         if not details:
             return {"best_lef": best}

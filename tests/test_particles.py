@@ -673,3 +673,43 @@ def test_generic_pool_has_no_population_kernels():
     assert not hasattr(pool, "eliminate") and not hasattr(pool.k, "eliminate")
     searching = SearchingPool([10], SHAPE, engine="numpy")
     assert hasattr(searching, "eliminate_and_hand_over") and hasattr(searching.k, "eliminate_and_hand_over")
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_the_kernels_hold_the_hosts_live_counts_after_every_operation(rng, engine):
+    """The paired step reads the second pool's live counts from its kernels (``n``), so every operation that
+    changes the host's counts must leave the same counts there: states loaded, counts set, a top-up, partial
+    resampling, a step with a top-up, particles removed, and an SGDS-PF hand-over."""
+    from tbd_taichi.methods.sgds.searching_pool import SearchingPool
+
+    (t, n), z = make_pools(rng)
+    pool = t if engine == "taichi" else n
+    checks = []
+
+    def check(what):
+        np.testing.assert_array_equal(pool._get("n"), pool.counts, err_msg=what)
+        checks.append(what)
+
+    check("set_state")
+    pool.set_counts([650, 0, 283])
+    check("set_counts")
+    pool.predict(0, top_up=[700, 100, 283])
+    check("predict with a top-up")
+    pool.weigh()
+    pool.resample(0, n_out=[300, 50, 283])
+    check("resample to other counts")
+    pool.step(1, z, top_up=[500, 50, 290])
+    check("step with a top-up")
+    keep = rng.random(int(pool.counts.sum())) < 0.5
+    pool.keep(keep)
+    check("keep")
+    pool.load_states(np.array([0, 0, 2]), {name: np.zeros(3) for name in ("x", "vx", "y", "vy", "inten", "e", "tp")})
+    check("load_states")
+    s = SearchingPool([40, 40], SHAPE, engine=engine, seed=3)
+    s.configure_groups([0, 1], "uniform", pb=0.3, pd=0.2)
+    s.predict(0, top_up=[40, 25])
+    pp = np.repeat([0, 1], [40, 25])
+    index = np.zeros(SHAPE, np.int32)
+    s.eliminate_and_hand_over(pp, [40, 25], [10, 5], [0.5, 0.5], index, 0.0, 0.0, [], 1.0, 1)
+    np.testing.assert_array_equal(s._get("n"), s.counts, err_msg="eliminate_and_hand_over")
+    assert s.counts.sum() < 65 and len(checks) == 7

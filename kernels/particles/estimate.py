@@ -3,7 +3,7 @@ particles and of the E = 1 particles), added deterministically (tiles serially, 
 """
 import taichi as ti
 
-from .layout import N_MOMENTS
+from .layout import M_BEST, N_MOMENTS
 
 
 @ti.data_oriented
@@ -38,7 +38,8 @@ class EstimateMixin:
 
     @ti.kernel
     def estimates(self, b: ti.i32, moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        """Per group, the tile sums added in tile order into ``moments`` (G, N_MOMENTS)."""
+        """Per group, the tile sums added in tile order into ``moments`` (G, N_ESTIMATES), and the last weigh's
+        largest E = 1 log-weight (column M_BEST)."""
         self.tile_sums(b)
         self.group_moments(moments)
 
@@ -57,3 +58,4 @@ class EstimateMixin:
             for t in range(self.gt0[g], self.gt1[g]):
                 s += self.tile_moments[t, k]
             moments[g, k] = s
+        moments[g, M_BEST] = ti.cast(self.best_e[g], ti.f64)

@@ -38,9 +38,17 @@ S_RESAMPLE_END, S_NOISE_Y, S_NOISE_VY = 22, 23, 24
 S_SYSTEMATIC = 99  # u0 of systematic resampling, one per group
 NOISE_STREAMS = (S_NOISE_X, S_NOISE_VX, S_NOISE_Y, S_NOISE_VY, S_NOISE_I)  # n1 … n5 of ``propagate``
 
-# per-group sums of ``moments`` (f64)
+# per-group columns of ``moments`` (f64): the sums of Eq. 19 (the first N_MOMENTS), then the last weigh's largest
+# E = 1 log-weight (M_BEST); ``estimates`` fills all N_ESTIMATES
 M_N, M_E, M_EX, M_EVX, M_EY, M_EVY, M_EI, M_TP, M_X, M_Y, M_XX, M_YY, M_XY, M_EXX, M_EYY, M_EXY = range(16)
 N_MOMENTS = 16
+M_BEST = N_MOMENTS
+N_ESTIMATES = N_MOMENTS + 1
+
+# the pool's constants (``LayoutMixin.constants``), set once per pool: the motion noise of Eq. 46, the intensity floor
+# (Eq. 10), the PSF spread Σ (Eq. 14) and the noise σ (Eq. 15)
+C_Q1, C_Q2, C_I_FLOOR, C_PSF_SIGMA, C_NOISE_SIGMA = range(5)
+N_CONSTANTS = 5
 
 FLOAT_STATE, INT_STATE = ("x", "vx", "y", "vy", "inten"), ("e", "tp", "seq")
 STATE = FLOAT_STATE + INT_STATE  # a particle's state, in the order of write_slots/read_slots rows
@@ -69,6 +77,8 @@ class LayoutMixin:
         self.bx0, self.bx1, self.by0, self.by1 = f32(g), f32(g), f32(g), f32(g)
         self.vmax, self.imin, self.imax = f32(g), f32(g), f32(g)
         self.gmax, self.gmax_e, self.gtotal = f32(g), f32(g), f64(g)
+        self.best_e = f32(g)  # gmax_e of the last weigh (``estimates``' M_BEST column)
+        self.constants, self.seed_key = f32(N_CONSTANTS), ti.field(ti.u32, shape=1)  # C_* columns; the random key
         self.gt0, self.gt1, self.gspc = i32(g), i32(g), f64(g)
         self.tile_start, self.tile_group = i32(n_tiles), i32(n_tiles)
         self.tile_max, self.tile_max_e, self.tile_total, self.tile_prefix = f32(n_tiles), f32(n_tiles), \
@@ -78,6 +88,16 @@ class LayoutMixin:
         self.map_pixel, self.map_seq, self.map_cdf = i32(map_capacity), i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
         self.normal, self.exponential = NormalTables(), ExponentialTables()
+
+    @ti.func
+    def step_values(self, frame: ti.i32, b: ti.i32):
+        """The values every stage of a step reads, as the stages take them: (seed, frame, b, q1, q2, I_floor, W, H,
+        Σ, σ), the pool's ``constants`` and ``seed_key`` with the frame index and the current buffer b (W and H,
+        px, are the frame's shape, fixed at compile time)."""
+        h, w = ti.static(self.frame_shape)
+        c = ti.static(self.constants)
+        return (self.seed_key[0], frame, b, c[C_Q1], c[C_Q2], c[C_I_FLOOR], w, h, c[C_PSF_SIGMA],
+                c[C_NOISE_SIGMA])
 
     @ti.func
     def tile_end(self, t: ti.i32) -> ti.i32:

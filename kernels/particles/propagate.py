@@ -167,16 +167,15 @@ class PropagateMixin:
                 self.e[b, i] = 0
 
     @ti.kernel
-    def predict(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32):
-        """Steps 1–2 in one launch (see ``predict_particles``)."""
-        self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
+    def predict(self, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """Steps 1–2 in one launch (see ``predict_particles``), with the pool's constants (``step_values``)."""
+        self.predict_particles(self.step_values(frame, b), counts)
 
     @ti.func
-    def predict_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(), q1: ti.f32,
-                          q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32):
+    def predict_particles(self, values: ti.template(), counts: ti.template()):
         """Steps 1–2: existence (Eqs. 7–8), live counts ← ``counts`` with the added slots as initial
-        particles (Eq. 35), newborn and initial draws, propagation (Eqs. 9–10)."""
+        particles (Eq. 35), newborn and initial draws, propagation (Eqs. 9–10); ``values``: ``step_values``."""
+        seed, frame, b, q1, q2, i_floor, width, height, _, _ = values
         self.predict_existence(seed, frame, b)
         self.store_counts(counts)
         self.mark_initial()

@@ -125,16 +125,16 @@ class ResampleMixin:
         p[k] += advance
 
     @ti.kernel
-    def resample(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    def resample(self, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
                  systematic: ti.template()):
-        """Step 5 in one launch (see ``resample_particles``)."""
-        self.resample_particles(seed, frame, b, counts, systematic)
+        """Step 5 in one launch (see ``resample_particles``), with the pool's random key (``step_values``)."""
+        self.resample_particles(self.step_values(frame, b), counts, systematic)
 
     @ti.func
-    def resample_particles(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(),
-                           systematic: ti.template()):
+    def resample_particles(self, values: ti.template(), counts: ti.template(), systematic: ti.template()):
         """Step 5 (Eqs. 17–18): each group draws ``counts[g]`` parents from buffer b and buffer 1 − b
-        receives them; live counts become ``counts``."""
+        receives them; live counts become ``counts``; ``values``: ``step_values``."""
+        seed, frame, b = values[0], values[1], values[2]
         self.set_out_counts(counts)
         if ti.static(not systematic):
             self.tile_spacings(seed, frame)

@@ -1,10 +1,29 @@
 """Steps 1–5 of the particle filter in one launch: ``step`` (the stages one after the other, or ``fused_step``'s
 three passes over the tiles) and ``step_pair`` (two pools on one frame, ``stepped_group`` per group).
 """
+from dataclasses import dataclass
+from functools import lru_cache
+
 import taichi as ti
 
 from ..rng import key_prefix
 from .layout import BIRTH_STREAMS, NOISE_STREAMS, S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC
+
+
+@dataclass(frozen=True)
+class StepOptions:
+    """The compile-time choices of ``step``: ``systematic`` resampling (else multinomial), ``read_seq`` (the
+    resampled particles' Seq into the step's ``seq``), ``fused`` (``fused_step``'s three passes).  Made by
+    :meth:`of`, one object per combination, since a launch keys a template argument by its identity."""
+
+    systematic: bool = False
+    read_seq: bool = False
+    fused: bool = False
+
+    @staticmethod
+    @lru_cache(maxsize=None)
+    def of(systematic: bool, read_seq: bool, fused: bool) -> "StepOptions":
+        return StepOptions(bool(systematic), bool(read_seq), bool(fused))
 
 
 @ti.data_oriented
@@ -13,51 +32,43 @@ class StepMixin:
     ``EstimateMixin``."""
 
     @ti.kernel
-    def step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-             q1: ti.f32, q2: ti.f32, i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32,
-             noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
-             z: ti.types.ndarray(dtype=ti.f32, ndim=2), n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
-             systematic: ti.template(), seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(),
-             fused: ti.template()):
+    def step(self, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+             n_out: ti.types.ndarray(dtype=ti.i32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
+             seq: ti.types.ndarray(dtype=ti.i32, ndim=1), options: ti.template()):
         """Steps 1–5 in one launch, for a filter with nothing to do between them (a launch costs
-        tens of µs on the CPU backend); with ``read_seq`` also the resampled particles' Seq in state
-        order into ``seq`` (:meth:`read_seq`, which the searching PFs need next); ``fused``: as
-        :meth:`fused_step` (CPU, tile loops split, no kind 2 group)."""
-        if ti.static(fused):
-            self.fused_step(seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z,
-                            n_out, systematic)
+        tens of µs on the CPU backend), with the pool's constants (``step_values``): live counts after the
+        top-up ``counts``, resampled counts ``n_out``.  ``options`` (:class:`StepOptions`): ``systematic``
+        resampling; ``read_seq``, also the resampled particles' Seq in state order into ``seq``
+        (:meth:`read_seq`, which the searching PFs need next); ``fused``, as :meth:`fused_step` (CPU, tile
+        loops split, no kind 2 group)."""
+        values = self.step_values(frame, b)
+        if ti.static(options.fused):
+            self.fused_step(values, counts, z, n_out, options.systematic)
         else:
-            self.predict_particles(seed, frame, b, counts, q1, q2, i_floor, width, height)
-            self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
-            self.resample_particles(seed, frame, b, n_out, systematic)
-        if ti.static(read_seq):
+            self.predict_particles(values, counts)
+            self.weigh_particles(values, z)
+            self.resample_particles(values, n_out, options.systematic)
+        if ti.static(options.read_seq):
             self.seq_in_state_order(1 - b, seq)
 
     @ti.func
-    def fused_step(self, seed: ti.u32, frame: ti.i32, b: ti.i32, counts: ti.template(), q1: ti.f32, q2: ti.f32,
-                   i_floor: ti.f32, width: ti.i32, height: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32,
-                   best: ti.template(), z: ti.template(), n_out: ti.template(), systematic: ti.template()):
+    def fused_step(self, values: ti.template(), counts: ti.template(), z: ti.template(), n_out: ti.template(),
+                   systematic: ti.template()):
         """Steps 1–5 for a pool without copied newborns (kind 2) whose tile loops are split over the
         threads: three passes over the tiles instead of eight, since each parallel pass costs a start
-        of Taichi's thread pool (about 50 µs on the 2-core VM).  Pass 1: existence, top-up, newborn
-        draws, propagation, log-weight and tile maxima, each a loop over the tile's slots (no slot reads
-        another: only kind 2 copies do; one loop per stage ran pass 1 in 1.80 ms, one loop doing all
-        stages slot by slot in 2.0 ms: the kernel profiler, 1.4 preset at 320×256); pass 2: each tile's
-        cumulative weights and spacings; pass 3: each tile's parents, then the gather of its outputs.
-        Serial steps between them combine the tiles of each group.  The same operations on the same
-        slots as the unfused step, so the same bits.  (``step_pair``'s single pass, ``stepped_group``, would
-        also do here with whole groups per thread, but it adds about 12 s to the kernel's first compile, for the
-        frames without an active track.)"""
+        of Taichi's thread pool.  Pass 1: existence, top-up, newborn draws, propagation, log-weight and
+        tile maxima, each a loop over the tile's slots (no slot reads another: only kind 2 copies do);
+        pass 2: each tile's cumulative weights and spacings; pass 3: each tile's parents, then the gather
+        of its outputs.  Serial steps between them combine the tiles of each group.  The same operations
+        on the same slots as the unfused step, so the same bits.  ``values``: ``step_values``."""
+        seed, frame, b = values[0], values[1], values[2]
         self.store_counts(counts)
-        values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
         if ti.static(self.tiles_by_group):
             self.for_groups(self.predicted_group, {'values': values, 'z': z})
         else:
             self.for_tiles(self.predicted_tile, {'values': values, 'z': z})
         self.group_maxima()
-        ti.loop_config(serialize=True)
-        for g in range(best.shape[0]):
-            best[g] = self.gmax_e[g]
+        self.keep_best()
         self.set_out_counts(n_out)
         self.for_tiles(self.weighted_tile, {'systematic': systematic, 'key': key_prefix(seed, frame, S_RESAMPLE)})
         self.group_prefix()
@@ -68,34 +79,25 @@ class StepMixin:
         self.commit_counts()
 
     @ti.kernel
-    def step_pair(self, other: ti.template(), seed: ti.u32, frame: ti.i32, b: ti.i32,
-                  counts: ti.types.ndarray(dtype=ti.i32, ndim=1), q1: ti.f32, q2: ti.f32, i_floor: ti.f32,
-                  width: ti.i32, height: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32,
-                  best: ti.types.ndarray(dtype=ti.f32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                  n_out: ti.types.ndarray(dtype=ti.i32, ndim=1), systematic: ti.template(),
-                  seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(), other_seed: ti.u32,
-                  other_b: ti.i32, other_counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                  other_best: ti.types.ndarray(dtype=ti.f32, ndim=1),
-                  other_n_out: ti.types.ndarray(dtype=ti.i32, ndim=1),
+    def step_pair(self, other: ti.template(), frame: ti.i32, b: ti.i32, other_b: ti.i32,
+                  counts: ti.types.ndarray(dtype=ti.i32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                  seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(),
                   moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        """``step`` (fused, whole groups per thread) of this pool and of ``other``, a second pool on the
-        same frame z with the same motion and PSF constants (the tracking PFs beside the searching PFs),
-        in the same pass (``stepped_group`` for each group of either pool), so the threads share both pools'
-        work and the serial pool ``other`` no longer leaves a core idle; with ``other``'s ``estimates`` into
-        ``moments``.  Each group is stepped as ``fused_step`` steps it, so both pools get the bits of their own
-        ``step``.  (One pass instead of three: step_with of 6 × 8000 + 32 × 500 particles at 320×256
-        5.2–5.4 → 4.7–4.8 ms, in one process; the first compile of an ``SGDSPF`` configuration took 62 s before,
-        75–91 s after, single runs without the offline cache.)"""
+        """``step`` (fused, whole groups per thread, multinomial, every group resampled to its live count
+        ``counts``) of this pool and of ``other``, a second pool on the same frame z with the same motion
+        and PSF constants (the tracking PFs beside the searching PFs), stepped at its live counts (its own
+        ``n``), in the same pass (``stepped_group`` for each group of either pool), so the threads share
+        both pools' work and the serial pool ``other`` no longer leaves a core idle; with ``other``'s
+        ``estimates`` into ``moments``.  Each group is stepped as ``fused_step`` steps it, so both pools
+        get the bits of their own ``step``."""
         self.store_counts(counts)
-        other.store_counts(other_counts)
-        values = (seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
-        other_values = (other_seed, frame, other_b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma)
+        other.store_counts(other.n)
         self.for_groups_with(other, self.stepped_group,
-                             {'values': values, 'z': z, 'best': best, 'n_out': n_out, 'systematic': systematic,
+                             {'values': self.step_values(frame, b), 'z': z, 'n_out': counts,
                               'resampled': self.resampled_tile, 'moments': ()},
                              other.stepped_group,
-                             {'values': other_values, 'z': z, 'best': other_best, 'n_out': other_n_out,
-                              'systematic': systematic, 'resampled': other.resampled_moments_tile, 'moments': moments})
+                             {'values': other.step_values(frame, other_b), 'z': z, 'n_out': other.n,
+                              'resampled': other.resampled_moments_tile, 'moments': moments})
         if ti.static(read_seq):
             self.seq_in_state_order(1 - b, seq)
 
@@ -107,22 +109,21 @@ class StepMixin:
         group.  One start of the thread pool a step instead of three (about 60 µs each on the 2-core VM), and
         the group's particles stay in the core's cache from stage to stage; the same operations in the same
         order as ``fused_step``, so the same bits.  ``loop``: {'values', 'z'} as ``predicted_group`` takes them,
-        'best' and 'n_out' as ``fused_step``'s, 'systematic', 'resampled' (``resampled_tile`` or
-        ``resampled_moments_tile``) and 'moments' (``estimates``' output, or () for none)."""
+        'n_out' as ``fused_step``'s, 'resampled' (``resampled_tile`` or
+        ``resampled_moments_tile``) and 'moments' (``estimates``' output, or () for none); multinomial."""
         seed, frame, b = loop['values'][0], loop['values'][1], loop['values'][2]
         self.predicted_group(g, loop)
         self.group_maximum(g)
-        loop['best'][g] = self.gmax_e[g]
+        self.best_e[g] = self.gmax_e[g]
         self.set_out_count(g, loop['n_out'])
         key = key_prefix(seed, frame, S_RESAMPLE)  # (a dict assigned to a name would turn its values into variables)
         for t in range(self.gt0[g], self.gt1[g]):
-            self.weighted_tile(t, {'systematic': loop['systematic'], 'key': key})
+            self.weighted_tile(t, {'systematic': False, 'key': key})
         self.group_cumulative(g)
-        if ti.static(not loop['systematic']):
-            self.group_spacing(g, key_prefix(seed, frame, S_RESAMPLE_END))
+        self.group_spacing(g, key_prefix(seed, frame, S_RESAMPLE_END))
         key = key_prefix(seed, frame, S_SYSTEMATIC)
         for t in range(self.gt0[g], self.gt1[g]):
-            loop['resampled'](t, {'systematic': loop['systematic'], 'b': b, 'key': key})
+            loop['resampled'](t, {'systematic': False, 'b': b, 'key': key})
         if ti.static(not isinstance(loop['moments'], tuple)):
             self.group_moment(g, loop['moments'])
         self.n[g] = self.n_out[g]

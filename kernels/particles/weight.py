@@ -149,18 +149,23 @@ class WeightMixin:
         self.normalise_weights()
 
     @ti.kernel
-    def weigh(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.types.ndarray(dtype=ti.f32, ndim=1),
-              z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
-        """Steps 3–4 in one launch (see ``weigh_particles``)."""
-        self.weigh_particles(b, psf_sigma, noise_sigma, best, z)
+    def weigh(self, b: ti.i32, z: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """Steps 3–4 in one launch (see ``weigh_particles``), with the pool's Σ and σ (``step_values``)."""
+        self.weigh_particles(self.step_values(0, b), z)
 
     @ti.func
-    def weigh_particles(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, best: ti.template(),
-                        z: ti.template()):
+    def weigh_particles(self, values: ti.template(), z: ti.template()):
         """Steps 3–4 on the normalised frame z (zero-bordered: H + 2·PAD, W + 2·PAD): log-weights
-        (Eq. 15), their normalisation, and each group's largest E = 1 log-weight into ``best``."""
+        (Eq. 15), their normalisation, and each group's largest E = 1 log-weight into ``best_e``;
+        ``values``: ``step_values``."""
+        b, psf_sigma, noise_sigma = values[2], values[8], values[9]
         self.log_weights(b, psf_sigma, noise_sigma, z)
         self.normalise_weights()
+        self.keep_best()
+
+    @ti.func
+    def keep_best(self):
+        """best_e ← gmax_e: each group's largest E = 1 log-weight of this weigh (``estimates`` reports it)."""
         ti.loop_config(serialize=True)
-        for g in range(best.shape[0]):
-            best[g] = self.gmax_e[g]
+        for g in range(self.best_e.shape[0]):
+            self.best_e[g] = self.gmax_e[g]

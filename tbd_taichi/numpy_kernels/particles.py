@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.particles.layout import (COPY_TRIES, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
+from ..kernels.particles.layout import (C_I_FLOOR, C_NOISE_SIGMA, C_PSF_SIGMA, C_Q1, C_Q2, COPY_TRIES, M_BEST,
+                                         N_CONSTANTS, N_MOMENTS, NEG_INF, S_BIRTH_ANGLE, S_BIRTH_I, S_BIRTH_MU,
                                          S_BIRTH_PIXEL, S_BIRTH_SPEED, S_BIRTH_X, S_BIRTH_Y, S_COPY, S_EXIST,
                                          NOISE_STREAMS, PAD, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, STATE, TILE,
                                          TWO_PI)
@@ -36,6 +37,11 @@ class NumpyParticleKernels:
             setattr(self, name, np.zeros(g, np.int32))
         for name in ("pb", "pd", "mu", "bx0", "bx1", "by0", "by1", "vmax", "imin", "imax", "gmax", "gmax_e"):
             setattr(self, name, np.zeros(g, F32))
+        self.best_e = np.zeros(g, F32)
+        # f64: the host's values exactly, which the NumPy steps use as Python floats (as the Taichi kernels take
+        # them rounded to f32)
+        self.constants, self.seed_key = np.zeros(N_CONSTANTS), np.zeros(1, np.uint32)
+        self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
         self.gtotal, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
         self.tile_max, self.tile_max_e = np.zeros(n_tiles, F32), np.zeros(n_tiles, F32)
@@ -46,6 +52,13 @@ class NumpyParticleKernels:
         self.map_cdf = np.zeros(map_capacity)
 
     # ------------------------------------------------------------ helpers
+
+    def step_values(self) -> tuple:
+        """(seed, q1, q2, I_floor, W, H, Σ, σ): the pool's ``constants`` (as Python floats) and ``seed_key`` and the
+        frame's shape."""
+        c = [float(v) for v in self.constants]
+        h, w = self.frame_shape
+        return (int(self.seed_key[0]), c[C_Q1], c[C_Q2], c[C_I_FLOOR], w, h, c[C_PSF_SIGMA], c[C_NOISE_SIGMA])
 
     def live_slots(self) -> np.ndarray:
         g = self.slot_group
@@ -88,7 +101,8 @@ class NumpyParticleKernels:
         new = i - self.off[g] >= self.n_before[g]
         self.born[i[new]] = 2
 
-    def predict(self, seed, frame, b, counts, q1, q2, i_floor, width, height) -> None:
+    def predict(self, frame: int, b: int, counts: np.ndarray) -> None:
+        seed, q1, q2, i_floor, width, height, _, _ = self.step_values()
         self.predict_existence(seed, frame, b)
         self.store_counts(counts)
         self.mark_initial()
@@ -169,10 +183,11 @@ class NumpyParticleKernels:
         self.tile_cumulative()
         self.group_prefix()
 
-    def weigh(self, b: int, psf_sigma: float, noise_sigma: float, best: np.ndarray, z: np.ndarray) -> None:
+    def weigh(self, b: int, z: np.ndarray) -> None:
+        *_, psf_sigma, noise_sigma = self.step_values()
         self.log_weights(b, psf_sigma, noise_sigma, z)
         self.normalise(b)
-        best[:] = self.gmax_e
+        self.best_e[:] = self.gmax_e
 
     # ------------------------------------------------------------ Eqs. 16–18
 
@@ -260,16 +275,16 @@ class NumpyParticleKernels:
     def set_counts(self, counts: np.ndarray) -> None:
         self.store_counts(counts)
 
-    def step(self, seed, frame, b, counts, q1, q2, i_floor, width, height, psf_sigma, noise_sigma, best, z, n_out,
-             systematic, seq, read_seq, fused=False) -> None:
-        """``fused`` changes only how the Taichi kernel orders its loops, not the result."""
-        self.predict(seed, frame, b, counts, q1, q2, i_floor, width, height)
-        self.weigh(b, psf_sigma, noise_sigma, best, z)
-        self.resample(seed, frame, b, n_out, systematic)
-        if read_seq:
+    def step(self, frame, b, counts, n_out, z, seq, options) -> None:
+        """``options.fused`` changes only how the Taichi kernel orders its loops, not the result."""
+        self.predict(frame, b, counts)
+        self.weigh(b, z)
+        self.resample(frame, b, n_out, options.systematic)
+        if options.read_seq:
             self.read_seq(1 - b, seq)
 
-    def resample(self, seed: int, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
+    def resample(self, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
+        seed = self.step_values()[0]
         self.n_out[:] = np.where(self.n > 0, counts, 0)
         if not systematic:
             self.tile_spacings(seed, frame)
@@ -326,7 +341,8 @@ class NumpyParticleKernels:
     def estimates(self, b: int, moments: np.ndarray) -> None:
         self.tile_sums(b)
         for g in range(len(self.off)):
-            moments[g] = self.tile_moments[self.gt0[g]:self.gt1[g]].sum(axis=0)
+            moments[g, :N_MOMENTS] = self.tile_moments[self.gt0[g]:self.gt1[g]].sum(axis=0)
+        moments[:, M_BEST] = self.best_e
 
     def load_map(self, off, count, total, pixel, seq, cdf) -> None:
         self.map_off[:], self.map_n[:], self.map_total[:] = off, count, total

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.populations import N_PP_SUMS, P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+from ..kernels.populations import N_PP_SUMS, P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, RULE_TRACKED
 from .particles import NumpyParticleKernels
 
 
@@ -37,17 +37,19 @@ def spread_removal(rank: np.ndarray, size: np.ndarray, take: np.ndarray, phase: 
     return ((rank + 1) * take + q) // size > (rank * take + q) // size
 
 
-def potential_targets(sums: np.ndarray, rule: np.ndarray, tracked: np.ndarray):
+def potential_targets(sums: np.ndarray, rule: np.ndarray):
     """Twin of ``PopulationKernels.potential_targets``, vectorised: (drop flags, hand-over ranks) per PP from
-    Eq. 38's sums; ``rule`` = (T_PTp, T_PE, squared duplicate radius, most handed, active tracks)."""
+    Eq. 38's sums; ``rule`` = (T_PTp, T_PE, squared duplicate radius, most handed, active tracks T, then their
+    T positions (x, y))."""
     t_ptp, t_pe, r2 = rule[:3]
     most, n_tracked = int(rule[3]), int(rule[4])
+    tracked = rule[RULE_TRACKED:RULE_TRACKED + 2 * n_tracked].reshape(-1, 2)
     n, ne = sums[:, P_KEPT], sums[:, P_KEPT_E]
     with np.errstate(invalid="ignore", divide="ignore"):  # n or ne = 0: NaN, never above a threshold
         potential = (n > 0) & (ne > 0) & (sums[:, P_TP] / n > t_ptp) & (ne / n > t_pe)
         px, py = sums[:, P_X] / ne, sums[:, P_Y] / ne
     near = np.zeros(len(n), bool)
-    for tx, ty in tracked[:n_tracked].tolist():
+    for tx, ty in tracked.tolist():
         near |= (px - tx) * (px - tx) + (py - ty) * (py - ty) < r2
     handed = np.flatnonzero(potential & ~near)[:most]
     rank = np.full(len(n), -1, np.int32)
@@ -73,7 +75,8 @@ class NumpyPopulationKernels:
         sums[:, P_Y] = np.bincount(pp, weights=np.where(with_e, self.y[b, slots], 0), minlength=n_pp)
         self._eliminated = (pp.copy(), size, kept)
 
-    def hand_over(self, b, drop, index, counts, rank, cursor, floats, ints, members) -> None:
+    def hand_over(self, b, index, counts, decisions, floats, ints, members) -> None:
+        drop, rank, cursor = decisions
         pp, size, kept = self._eliminated
         slots = self.live_slots()
         if members:  # the survivors of the ranked PPs, PP by PP (rank order), each in state order
@@ -96,14 +99,16 @@ class NumpyPopulationKernels:
         self.keep_particles(b, keep)
         counts[:] = self.n
 
-    def eliminate_and_hand_over(self, b, pp, table, rule, tracked, index, counts, outcome, floats, ints) -> None:
+    def eliminate_and_hand_over(self, b, pp, table, rule, index, counts, outcome, floats, ints) -> None:
         sums = np.zeros((table.shape[1], N_PP_SUMS))
         self.eliminate(b, pp, table, np.zeros(len(pp), np.int8), sums)
-        drop, rank = potential_targets(sums, rule, tracked)
+        drop, rank = potential_targets(sums, rule)
         kept = sums[:, P_KEPT].astype(np.int32)
         sizes = kept[rank >= 0]
-        cursor = np.concatenate([[0], np.cumsum(sizes)])  # each handed PP's first column (cursor[0] even if none)
-        self.hand_over(b, drop.astype(np.int8), index, counts, rank, cursor, floats, ints, True)
+        decisions = np.zeros((3, len(rank)), np.int32)  # hand_over's: drop, rank, each rank's first column
+        decisions[0], decisions[1] = drop, rank
+        decisions[2, :len(sizes)] = np.cumsum(sizes) - sizes
+        self.hand_over(b, index, counts, decisions, floats, ints, True)
         outcome[0], outcome[1] = rank, kept
 
 

@@ -88,15 +88,13 @@ class SearchingPool(ParticlePool):
         self._eliminated = None
         n_pp = table.shape[1]
         tracked = np.asarray(tracked, np.float64).reshape(-1, 2)
-        rule = np.array([t_ptp, t_pe, radius * radius, max(int(most), 0), len(tracked)], np.float64)
-        if not len(tracked):
-            tracked = np.zeros((1, 2))  # the kernel's array argument, unread
+        rule = np.concatenate([[t_ptp, t_pe, radius * radius, max(int(most), 0), len(tracked)], tracked.ravel()])
         outcome = np.full((2, n_pp), -1, np.int32)  # per PP: hand-over rank, survivors
         floats = np.empty((len(FLOAT_STATE), max(n, 1)), np.float32)
         ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
         if n:
             counts = np.empty(self.n_groups, np.int32)
-            self.k.eliminate_and_hand_over(self.buf, pp, table, rule, tracked, index, counts, outcome, floats, ints)
+            self.k.eliminate_and_hand_over(self.buf, pp, table, rule, index, counts, outcome, floats, ints)
             self.counts = counts
         else:
             index[...] = 0
@@ -128,11 +126,12 @@ class SearchingPool(ParticlePool):
         floats = np.empty((len(FLOAT_STATE), max(int(sizes.sum()), 1)), np.float32)
         ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
         if n:
-            rank = np.full(n_pp, -1, np.int32)
-            rank[handed] = np.arange(len(handed), dtype=np.int32)
-            cursor = (np.cumsum(sizes) - sizes).astype(np.int32) if len(handed) else np.zeros(1, np.int32)
+            decisions = np.zeros((3, n_pp), np.int32)  # per PP: drop flag, hand-over rank; per rank: first column
+            decisions[0], decisions[1] = drop, -1
+            decisions[1, handed] = np.arange(len(handed))
+            decisions[2, :len(handed)] = np.cumsum(sizes) - sizes
             counts = np.empty(self.n_groups, np.int32)
-            self.k.hand_over(self.buf, drop, index, counts, rank, cursor, floats, ints, want)
+            self.k.hand_over(self.buf, index, counts, decisions, floats, ints, want)
             self.counts = counts
         else:
             index[...] = 0
