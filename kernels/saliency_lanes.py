@@ -6,6 +6,8 @@ always read as "outside the image".
 """
 import taichi as ti
 
+from .loops import thread_span
+
 LANES = 8
 NEG_INF = -3.0e38
 LEF_NO_CAP = 3.0e38  # upper intensity bound of the multi-frame LEF's per-frame term (no cap)
@@ -58,6 +60,22 @@ def positive_row_vector(z: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32) -> V
 def chunk_rows(c: ti.i32, n_chunks: ti.i32, h: ti.i32):
     """Rows [y0, y1) of chunk c when h rows are split into n_chunks near-equal runs."""
     return (c * h) // n_chunks, ((c + 1) * h) // n_chunks
+
+
+@ti.func
+def for_row_chunks(h: ti.template(), halo: ti.template(), n_chunks: ti.i32, serial: ti.template(), body: ti.template(),
+                   args: ti.template()):
+    """body(c, y, y0, y1, args) for every chunk c of the h rows, [y0, y1) (``chunk_rows``), and each y in
+    [y0 − halo, y1 + halo) in order: the streamed filters' walk down the image, one thread a chunk (the first
+    iteration of each thread_span-long run of the parallel loop, see ``loops.thread_span``)."""
+    span = ti.static(thread_span(serial))
+    ti.loop_config(serialize=serial)
+    for u in range(n_chunks * span):
+        if u % span == 0:
+            c = u // span
+            y0, y1 = chunk_rows(c, n_chunks, h)
+            for y in range(y0 - halo, y1 + halo):
+                body(c, y, y0, y1, args)
 
 
 @ti.func

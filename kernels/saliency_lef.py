@@ -5,9 +5,8 @@ The 5×5 correlation of Eq. 27 reads 0 outside the image.
 """
 import taichi as ti
 
-from .loops import thread_span
 from .saliency_fields import R_FRAME, R_MEMORY, R_MEMORY_SRC, R_SUM_A, R_SUM_B, R_SUM_C
-from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_rows, frame_vector,
+from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, frame_vector,
                              lane_shift, store_row_moments, sum_of_slots)
 from .saliency_maxfilter import column_max, row_max
 
@@ -95,22 +94,27 @@ def multi_frame_lef(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, m
     where z⋆D > 0, else 0).  The max filter lets the best path move ≤ r px per frame, so a
     target's evidence adds up along its track over about 1/(1 − γ) frames, while noise peaks
     do not line up.  The max filter is streamed like :func:`accumulate_max`; padding lanes 0."""
-    h = memory.shape[1]
-    span = ti.static(thread_span(serial))
-    ti.loop_config(serialize=serial)
-    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
-        if u % span == 0:
-            c = u // span
-            y0, y1 = chunk_rows(c, n_chunks, h)
-            for y in range(y0 - r, y1 + r):
-                if 0 <= y < h:
-                    row_max(memory, src, y, ring, c, y % (2 * r + 1), valid, r)
-                yc = y - r
-                if y0 <= yc < y1:
-                    column_max(ring, c, yc, h, memory, dst, valid, r)
-                    for xb in range(memory.shape[2]):
-                        lef = lef_log_weight(correlate_d(z, zs, d, yc, xb), a, ti.f32(0.0), ti.f32(LEF_NO_CAP))
-                        memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + memory_decay * memory[dst, yc, xb], VEC(0.0))
+    for_row_chunks(ti.static(memory.shape[1]), r, n_chunks, serial, multi_frame_lef_rows,
+                   {'z': z, 'zs': zs, 'd': d, 'a': a, 'decay': memory_decay, 'valid': valid, 'memory': memory,
+                    'src': src, 'dst': dst, 'ring': ring, 'r': r})
+
+
+@ti.func
+def multi_frame_lef_rows(c: ti.i32, y: ti.i32, y0: ti.i32, y1: ti.i32, args: ti.template()):
+    """``multi_frame_lef`` at row y of chunk c (rows [y0, y1)): row y's row maximum of memory[src], row y − r's
+    column maximum and its new memory."""
+    memory, ring, valid = ti.static(args['memory'], args['ring'], args['valid'])
+    r, h = ti.static(args['r'], args['memory'].shape[1])
+    dst = args['dst']
+    if 0 <= y < h:
+        row_max(memory, args['src'], y, ring, c, y % (2 * r + 1), valid, r)
+    yc = y - r
+    if y0 <= yc < y1:
+        column_max(ring, c, yc, h, memory, dst, valid, r)
+        for xb in range(memory.shape[2]):
+            lef = lef_log_weight(correlate_d(args['z'], args['zs'], args['d'], yc, xb), args['a'], ti.f32(0.0),
+                                 ti.f32(LEF_NO_CAP))
+            memory[dst, yc, xb] = ti.select(valid[xb] > 0, lef + args['decay'] * memory[dst, yc, xb], VEC(0.0))
 
 
 @ti.kernel

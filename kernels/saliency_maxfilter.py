@@ -8,9 +8,8 @@ pixels are ignored by the max filters and contribute 0 to the energy sum of Eq. 
 """
 import taichi as ti
 
-from .loops import thread_span
 from .saliency_fields import R_DST, R_FRAME, R_SUM_A, R_SUM_B, R_SUM_C
-from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_rows, lane_shift,
+from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, lane_shift,
                              positive_row_vector, row_vector, store_row_moments, sum_of_slots)
 
 
@@ -109,26 +108,31 @@ def energy_and_max(z: ti.template(), zs: ti.i32, valid: ti.template(), hs: ti.te
     intermediate row stays in cache.  Chunks recompute 2r halo rows on each side.
     With ``keep_i_se``, I_se is also written to i_se[0] (tests, figures).
     """
-    h = z.shape[1]
-    span = ti.static(thread_span(serial))
-    ti.loop_config(serialize=serial)
-    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
-        if u % span == 0:
-            c = u // span
-            y0, y1 = chunk_rows(c, n_chunks, h)
-            for y in range(y0 - 2 * r, y1 + 2 * r):
-                if 0 <= y < h:
-                    energy_row_pass(z, zs, y, hs, hm, c, r)
-                yb = y - r
-                if 0 <= yb < h and y0 - r <= yb < y1 + r:
-                    for xb in range(z.shape[2]):
-                        line[c, 0, xb] = energy_column(z, zs, hs, hm, c, yb, xb, r)
-                        if ti.static(keep_i_se):
-                            if y0 <= yb < y1:
-                                i_se[0, yb, xb] = line[c, 0, xb]
-                    row_max(line, c, 0, ring, c, yb % (2 * r + 1), valid, r)
-                if y0 <= y - 2 * r < y1:
-                    column_max(ring, c, y - 2 * r, h, se_max, ds, valid, r)
+    h = ti.static(z.shape[1])
+    for_row_chunks(h, 2 * r, n_chunks, serial, energy_and_max_rows,
+                   {'z': z, 'zs': zs, 'valid': valid, 'hs': hs, 'hm': hm, 'line': line, 'ring': ring,
+                    'se_max': se_max, 'ds': ds, 'r': r, 'i_se': i_se, 'keep_i_se': keep_i_se})
+
+
+@ti.func
+def energy_and_max_rows(c: ti.i32, y: ti.i32, y0: ti.i32, y1: ti.i32, args: ti.template()):
+    """``energy_and_max`` at row y of chunk c (rows [y0, y1)): row y's row pass, row y − r's I_se and its row
+    maximum, row y − 2r's column maximum."""
+    z, hs, hm, line, ring = ti.static(args['z'], args['hs'], args['hm'], args['line'], args['ring'])
+    r, h = ti.static(args['r'], args['z'].shape[1])
+    zs = args['zs']
+    if 0 <= y < h:
+        energy_row_pass(z, zs, y, hs, hm, c, r)
+    yb = y - r
+    if 0 <= yb < h and y0 - r <= yb < y1 + r:
+        for xb in range(z.shape[2]):
+            line[c, 0, xb] = energy_column(z, zs, hs, hm, c, yb, xb, r)
+            if ti.static(args['keep_i_se']):
+                if y0 <= yb < y1:
+                    args['i_se'][0, yb, xb] = line[c, 0, xb]
+        row_max(line, c, 0, ring, c, yb % (2 * r + 1), args['valid'], r)
+    if y0 <= y - 2 * r < y1:
+        column_max(ring, c, y - 2 * r, h, args['se_max'], args['ds'], args['valid'], r)
 
 
 @ti.func
@@ -138,23 +142,28 @@ def first_layer_sum(src: ti.template(), a: ti.i32, b: ti.i32, c3: ti.i32, scale:
     """First layer of Eq. 22: I_acc = (Σ of src slots a, b, c3; −1 skipped)·scale into acc[ds] and its
     (2r+1)² max filter into acc_max[ds], streamed like :func:`energy_and_max` (r halo rows).
     With one slot and scale 1 it is the max filter of that slot."""
-    h = src.shape[1]
-    span = ti.static(thread_span(serial))
-    ti.loop_config(serialize=serial)
-    for u in range(n_chunks * span):  # chunk u // span (see loops.thread_span)
-        if u % span == 0:
-            c = u // span
-            y0, y1 = chunk_rows(c, n_chunks, h)
-            for y in range(y0 - r, y1 + r):
-                if 0 <= y < h:
-                    for xb in range(src.shape[2]):
-                        v = sum_of_slots(src, a, b, c3, y, xb) * scale
-                        line[c, 0, xb] = v
-                        if y0 <= y < y1:
-                            acc[ds, y, xb] = v
-                    row_max(line, c, 0, ring, c, y % (2 * r + 1), valid, r)
-                if y0 <= y - r < y1:
-                    column_max(ring, c, y - r, h, acc_max, ds, valid, r)
+    for_row_chunks(ti.static(src.shape[1]), r, n_chunks, serial, first_layer_rows,
+                   {'src': src, 'slots': (a, b, c3), 'scale': scale, 'valid': valid, 'acc': acc, 'ds': ds, 'line': line,
+                    'ring': ring, 'acc_max': acc_max, 'r': r})
+
+
+@ti.func
+def first_layer_rows(c: ti.i32, y: ti.i32, y0: ti.i32, y1: ti.i32, args: ti.template()):
+    """``first_layer_sum`` at row y of chunk c (rows [y0, y1)): row y's sum and row maximum, row y − r's column
+    maximum."""
+    src, line, ring = ti.static(args['src'], args['line'], args['ring'])
+    r, h = ti.static(args['r'], args['src'].shape[1])
+    ds = args['ds']
+    if 0 <= y < h:
+        a, b, c3 = args['slots']
+        for xb in range(src.shape[2]):
+            v = sum_of_slots(src, a, b, c3, y, xb) * args['scale']
+            line[c, 0, xb] = v
+            if y0 <= y < y1:
+                args['acc'][ds, y, xb] = v
+        row_max(line, c, 0, ring, c, y % (2 * r + 1), args['valid'], r)
+    if y0 <= y - r < y1:
+        column_max(ring, c, y - r, h, args['acc_max'], ds, args['valid'], r)
 
 
 @ti.kernel

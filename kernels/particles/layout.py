@@ -54,6 +54,19 @@ FLOAT_STATE, INT_STATE = ("x", "vx", "y", "vy", "inten"), ("e", "tp", "seq")
 STATE = FLOAT_STATE + INT_STATE  # a particle's state, in the order of write_slots/read_slots rows
 
 
+@ti.func
+def first_above(values: ti.template(), lo: ti.i32, hi: ti.i32, v: ti.f64) -> ti.i32:
+    """The first index k in [lo, hi] with values[k] > v (hi if none), for ``values`` non-decreasing there: a binary
+    search (the inverse-CDF draws of Eqs. 18 and 34)."""
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] > v:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 @ti.data_oriented
 class LayoutMixin:
     """The pool's fields (structure of arrays, two buffers), its tiles and the loops over them."""

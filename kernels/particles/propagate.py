@@ -4,7 +4,7 @@ of Eq. 35) and propagation of existing particles (Eqs. 9–10).
 import taichi as ti
 
 from ..rng import key_prefix, normal_at, uniform_at, uniform_f64_at
-from .layout import BIRTH_STREAMS, COPY_TRIES, NOISE_STREAMS, S_EXIST, TWO_PI
+from .layout import BIRTH_STREAMS, COPY_TRIES, NOISE_STREAMS, S_EXIST, TWO_PI, first_above
 
 
 @ti.data_oriented
@@ -38,15 +38,7 @@ class PropagateMixin:
     @ti.func
     def map_entry_draw(self, g: ti.i32, v: ti.f64) -> ti.i32:
         """First entry of group g's proposal list whose cumulative weight exceeds v (binary search)."""
-        lo = self.map_off[g]
-        hi = lo + self.map_n[g] - 1
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if self.map_cdf[mid] > v:
-                hi = mid
-            else:
-                lo = mid + 1
-        return lo
+        return first_above(self.map_cdf, self.map_off[g], self.map_off[g] + self.map_n[g] - 1, v)
 
     @ti.func
     def first_added_slot(self, g: ti.i32, args: ti.template()) -> ti.i32:

@@ -4,7 +4,7 @@ with the parents found by interleaved merge walks and the states gathered into t
 import taichi as ti
 
 from ..rng import exponential_at, key_prefix, uniform_f64_at
-from .layout import S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, WALKS
+from .layout import S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC, WALKS, first_above
 
 
 @ti.data_oriented
@@ -15,14 +15,7 @@ class ResampleMixin:
     def first_slot_above(self, g: ti.i32, v: ti.f64) -> ti.i32:
         """Eq. 18: the first live slot of group g whose upper edge Σ_{j ≤ slot} w_j (cum, Eq. 17) exceeds v
         (the last one if none)."""
-        lo, hi = self.off[g], self.off[g] + self.n[g] - 1
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if self.cum[mid] > v:
-                hi = mid
-            else:
-                lo = mid + 1
-        return lo
+        return first_above(self.cum, self.off[g], self.off[g] + self.n[g] - 1, v)
 
     @ti.func
     def tile_spacings(self, seed: ti.u32, frame: ti.i32):
