@@ -52,7 +52,7 @@ from .normalize import mean_background, normalise_frame, robust_sigma
 
 BACKGROUNDS = ("none", "mean", "spatial", "temporal", "spatiotemporal")
 DEFAULT_BACKGROUND = "none"  # see the module notes; real video: REAL_VIDEO
-REAL_VIDEO = dict(background="spatiotemporal", snr=5.0, min_peak_z=15.0)  # SGDSPF settings for real still-camera video (README)
+REAL_VIDEO = dict(background="spatiotemporal", snr=5.0, min_peak_z=16.0)  # SGDSPF settings for real still-camera video (README)
 OUTER_RADIUS, GUARD_RADIUS = 5, 2  # hollow window: 11×11 minus the central 5×5
 NOISE_RADIUS = 7  # 15×15 local noise window
 NOISE_CLIP = 3.0  # residuals clipped at 3σ_global before the local noise mean

@@ -36,13 +36,18 @@ class FrameSource:
     """A sequence that can be streamed: its name, frame shape (H, W) and length.
 
     ``n_frames`` is exact for arrays and folders; for videos it is the container's
-    own count, which some codecs only estimate (None when unknown).
+    own count, which some codecs only estimate (None when unknown).  ``kind``: "array", "video" or
+    "folder"; ``dtype``: the frames' type as stored (before the float32 conversion); ``fps``: a video's
+    frame rate (None when it has none).
     """
 
     name: str
     shape: tuple[int, int]
     n_frames: int | None
     _open: Callable[[], Iterator[np.ndarray]]
+    kind: str = "array"
+    dtype: np.dtype = np.dtype(np.float32)
+    fps: float | None = None
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for index, frame in enumerate(self._open()):
@@ -69,7 +74,7 @@ def to_grey(image: np.ndarray, where: str) -> np.ndarray:
 
 
 def _check_dtype(dtype: np.dtype, where: str) -> None:
-    if dtype.kind not in "biuf":
+    if dtype.kind not in "iuf":
         raise InputError(f"{where}: dtype {dtype} is not a real number type; expected an integer or float array")
 
 
@@ -93,6 +98,8 @@ def stream_frame(frame, shape: tuple[int, int], index: int, owner: str) -> np.nd
     """Frame ``index`` handed to a streaming ``owner`` (tracker, extractor) as float32, checked for
     its shape and for NaN/inf."""
     frame = np.asarray(frame)
+    if frame.dtype.kind not in "iuf":
+        raise InputError(f"frame {index} has dtype {frame.dtype}; the {owner} takes integer or float frames")
     if frame.shape != tuple(shape):
         raise InputError(f"frame {index} has shape {frame.shape}; the {owner} was built for {tuple(shape)}")
     if not np.isfinite(frame).all():
@@ -106,7 +113,21 @@ def _array_source(array: np.ndarray, name: str) -> FrameSource:
         raise InputError(f"{name}: array has {array.ndim} dimensions {array.shape}; expected 3 dimensions (T, H, W)")
     if array.shape[1] < 1 or array.shape[2] < 1:
         raise InputError(f"{name}: frames of size {array.shape[1]}x{array.shape[2]} are empty")
-    return FrameSource(name, (int(array.shape[1]), int(array.shape[2])), int(array.shape[0]), lambda: iter(array))
+    _check_finite(array, name)
+    return FrameSource(name, (int(array.shape[1]), int(array.shape[2])), int(array.shape[0]), lambda: iter(array),
+                       dtype=array.dtype)
+
+
+def _check_finite(array: np.ndarray, name: str, chunk: int = 64) -> None:
+    """A float array's first frame holding NaN or inf, as an InputError before any work (chunks of frames: no
+    whole-array temporary)."""
+    if array.dtype.kind != "f":
+        return
+    for start in range(0, len(array), chunk):
+        finite = np.isfinite(array[start:start + chunk]).all(axis=(1, 2))
+        if not finite.all():
+            index = start + int(np.argmin(finite))
+            raise InputError(f"{name}: frame {index} contains {'NaN' if np.isnan(array[index]).any() else 'inf'}")
 
 
 def _load_array(path: Path) -> np.ndarray:
@@ -127,6 +148,7 @@ def _video_source(path: Path) -> FrameSource:
     capture = cv2.VideoCapture(str(path))
     ok, first = capture.read() if capture.isOpened() else (False, None)
     count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if ok else 0
+    fps = float(capture.get(cv2.CAP_PROP_FPS)) if ok else 0.0
     capture.release()
     if not ok or first is None:
         raise InputError(f"{path}: unreadable video (OpenCV could not decode a frame)")
@@ -143,7 +165,8 @@ def _video_source(path: Path) -> FrameSource:
         finally:
             cap.release()
 
-    return FrameSource(str(path), shape, count if count > 0 else None, frames)
+    return FrameSource(str(path), shape, count if count > 0 else None, frames, kind="video", dtype=first.dtype,
+                       fps=fps if 0 < fps < 1000 else None)
 
 
 def _read_image(path: Path) -> np.ndarray:
@@ -158,7 +181,8 @@ def _folder_source(path: Path) -> FrameSource:
                    key=lambda p: natural_key(p.name))
     if not files:
         raise InputError(f"{path}: folder holds no {'/'.join(IMAGE_SUFFIXES)} images")
-    shape = _read_image(files[0]).shape
+    first = _read_image(files[0])
+    shape = first.shape
 
     def frames() -> Iterator[np.ndarray]:
         for index, file in enumerate(files):
@@ -168,7 +192,7 @@ def _folder_source(path: Path) -> FrameSource:
                                  f"expected {shape[0]}x{shape[1]} like {files[0].name}; images of mixed sizes")
             yield image
 
-    return FrameSource(str(path), shape, len(files), frames)
+    return FrameSource(str(path), shape, len(files), frames, kind="folder", dtype=first.dtype)
 
 
 def open_frames(source) -> FrameSource:
@@ -200,6 +224,13 @@ def _too_few(name: str, n: int, min_frames: int) -> InputError:
     return InputError(f"{name}: {n} frame(s), but at least {min_frames} are needed")
 
 
+def check_length(src: FrameSource, min_frames: int = 1) -> None:
+    """An InputError if ``src`` is known to hold fewer than ``min_frames`` frames (a video's own count is only an
+    estimate: it is checked as it streams)."""
+    if src.n_frames is not None and src.n_frames < max(min_frames, 1) and src.kind != "video":
+        raise _too_few(src.name, src.n_frames, max(min_frames, 1))
+
+
 def iter_frames(source, min_frames: int = 1) -> Iterator[np.ndarray]:
     """Stream float32 (H, W) frames from ``source`` (see :func:`open_frames`).
 
@@ -207,8 +238,7 @@ def iter_frames(source, min_frames: int = 1) -> Iterator[np.ndarray]:
     short, otherwise when the stream ends short.
     """
     src = open_frames(source)
-    if src.n_frames is not None and src.n_frames < min_frames and not src.name.endswith(VIDEO_SUFFIXES):
-        raise _too_few(src.name, src.n_frames, min_frames)
+    check_length(src, min_frames)
     count = 0
     for frame in src:
         count += 1

@@ -18,7 +18,8 @@ from __future__ import annotations
 from itertools import permutations
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+
+from .errors import ParameterError
 
 T0 = 2.0  # px, Eq. 48
 T1 = 0.2  # Eq. 49
@@ -102,6 +103,8 @@ def ospa(estimates, truths, c: float = OSPA_C, p: float = OSPA_P) -> float:
     if m == 0:
         return float(c)
     cost = np.minimum(np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1]), c) ** p
+    from scipy.optimize import linear_sum_assignment  # imported here: 0.4 s the CLI's early errors don't pay
+
     rows, cols = linear_sum_assignment(cost)
     return float(((cost[rows, cols].sum() + c ** p * (n - m)) / n) ** (1.0 / p))
 
@@ -132,9 +135,48 @@ def mean_ospa(tracks: np.ndarray, truth: np.ndarray, c: float = OSPA_C, p: float
     return float(np.mean([ospa(est.get(f, empty), tru.get(f, empty), c, p) for f in range(n_frames)]))
 
 
-def evaluate(tracks: np.ndarray, truth: np.ndarray, t0: float = T0, ospa_c: float = OSPA_C,
+def as_table(obj, columns: tuple[str, ...], name: str, optional: tuple[str, ...] = ()) -> np.ndarray:
+    """``obj`` as a structured table with ``columns``: a structured array (or a dict of columns) that has them, or
+    rows (a list of tuples, a 2-D array) in the order ``columns`` + ``optional``; else a ParameterError naming
+    what ``name`` needs."""
+    from .tables import _dtype, make_table
+
+    need = f"{name} needs a table with columns {','.join(columns)} (a tbd_taichi.tables table, a dict of columns " \
+           f"or rows in that order)"
+    names = getattr(getattr(obj, "dtype", None), "names", None)
+    try:
+        if names is not None or isinstance(obj, dict):
+            keys = names if names is not None else tuple(obj)
+            missing = [c for c in columns if c not in keys]
+            if missing:
+                raise ParameterError(f"{need}; it lacks {','.join(missing)}")
+            cols = columns + tuple(c for c in optional if c in keys)
+            n = len(np.asarray(obj[columns[0]]))
+            return make_table(zip(*[np.broadcast_to(np.asarray(obj[c], float), n) for c in cols]), _dtype(cols))
+        rows = np.asarray(obj, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(need) from None
+    if rows.size == 0:
+        return np.zeros(0, _dtype(columns))
+    if rows.ndim != 2 or rows.shape[1] not in range(len(columns), len(columns) + len(optional) + 1):
+        raise ParameterError(f"{need}; got shape {rows.shape}")
+    if not np.isfinite(rows).all():
+        raise ParameterError(f"{name} holds NaN or infinite values")
+    cols = (columns + optional)[: rows.shape[1]]
+    return make_table(map(tuple, rows), _dtype(cols))
+
+
+def evaluate(tracks, truth, t0: float = T0, ospa_c: float = OSPA_C,
              ospa_p: float = OSPA_P, n_frames: int | None = None) -> dict:
-    """All metrics for one run: dsr, edt_mean, false_tracks, ospa, and per-target scores."""
+    """All metrics for one run: dsr, edt_mean, false_tracks, ospa, and per-target scores.  ``tracks``, ``truth``:
+    tables (or array-likes, :func:`as_table`); T0 ≥ 0, OSPA c > 0 and p ≥ 1 (px)."""
+    from .validate import positive
+
+    tracks = as_table(tracks, ("frame", "track_id", "x", "y"), "tracks")
+    truth = as_table(truth, ("frame", "target_id", "x", "y"), "truth")
+    positive("t0", t0, 0.0, closed=True)
+    positive("ospa_c", ospa_c)
+    positive("ospa_p", ospa_p, 1.0, closed=True)
     scores = target_scores(tracks, truth, t0)
     edts = [s["edt_mean"] for s in scores.values() if np.isfinite(s["edt_mean"])]
     return {
@@ -147,23 +189,58 @@ def evaluate(tracks: np.ndarray, truth: np.ndarray, t0: float = T0, ospa_c: floa
     }
 
 
-def box_scores(tracks: np.ndarray, boxes: np.ndarray, n_frames: int, grow: float = 2.0) -> dict:
-    """Real-data scores against labelled boxes (frame,x,y,w,h), each box grown by ``grow`` px:
+BOX_MARGIN = 2.0  # px: a box grows by this on every side before a track point is tested against it
 
-    * ``detection_rate``: fraction of labelled frames with a track point inside the grown box;
-    * ``false_points``: track points outside every grown box, per frame of the sequence;
-    * ``first_confirmation``: frames from the first labelled frame to the first hit (NaN: none).
+
+def box_scores(tracks, boxes, n_frames: int, grow: float = BOX_MARGIN) -> dict:
+    """Scores against labelled boxes (frame,x,y,w,h[,target_id]), each box grown by ``grow`` px on every side:
+
+    * ``detection_rate``: fraction of labelled boxes (frame, target) with a track point inside the grown box;
+    * ``false_points``: track points outside every grown box of their frame, per frame of the sequence;
+    * ``first_confirmation``: frames from the first labelled frame to the first hit (NaN: none);
+    * ``centre_error``: mean distance (px) from each hit box's centre to the nearest track point inside it;
+    * ``iou``: mean intersection over union of each hit box and the track's box, for tracks with w and h
+      (box trackers; NaN for point trackers).
     """
-    box = {int(b["frame"]): (b["x"] - grow, b["x"] + b["w"] + grow, b["y"] - grow, b["y"] + b["h"] + grow)
-           for b in boxes}
-    hits, false = set(), 0
-    for f, x, y in zip(tracks["frame"].tolist(), tracks["x"].tolist(), tracks["y"].tolist()):
-        b = box.get(int(f))
-        if b is not None and b[0] <= x <= b[1] and b[2] <= y <= b[3]:
-            hits.add(int(f))
-        else:
+    from .validate import positive
+
+    tracks = as_table(tracks, ("frame", "track_id", "x", "y"), "tracks", ("w", "h"))
+    boxes = as_table(boxes, ("frame", "x", "y", "w", "h"), "boxes", ("target_id",))
+    positive("grow", grow, 0.0, closed=True)
+    has_size = "w" in (tracks.dtype.names or ()) and len(tracks)
+    by_frame: dict[int, list] = {}
+    for b in boxes:
+        by_frame.setdefault(int(b["frame"]), []).append(b)
+    hits, false, centre, overlap, hit_frames = set(), 0, [], [], []
+    for t in tracks:
+        inside = [k for k, b in enumerate(by_frame.get(int(t["frame"]), ()))
+                  if b["x"] - grow <= t["x"] <= b["x"] + b["w"] + grow and b["y"] - grow <= t["y"] <= b["y"] + b["h"] + grow]
+        if not inside:
             false += 1
-    first = min(box) if box else 0
-    return dict(detection_rate=len(hits) / len(box) if box else float("nan"),
+        for k in inside:
+            hits.add((int(t["frame"]), k))
+    for f, k in sorted(hits):
+        b = by_frame[f][k]
+        pts = tracks[tracks["frame"] == f]
+        d = np.hypot(pts["x"] - (b["x"] + b["w"] / 2), pts["y"] - (b["y"] + b["h"] / 2))
+        j = int(np.argmin(d))
+        centre.append(float(d[j]))
+        hit_frames.append(f)
+        if has_size:
+            overlap.append(box_iou(b, pts[j]))
+    first = min(by_frame) if by_frame else 0
+    return dict(detection_rate=len(hits) / len(boxes) if len(boxes) else float("nan"),
                 false_points=false / max(n_frames, 1),
-                first_confirmation=float(min(hits) - first) if hits else float("nan"))
+                first_confirmation=float(min(hit_frames) - first) if hit_frames else float("nan"),
+                centre_error=float(np.mean(centre)) if centre else float("nan"),
+                iou=float(np.mean(overlap)) if overlap else float("nan"))
+
+
+def box_iou(box, track) -> float:
+    """Intersection over union of a labelled box (x, y corner, w, h) and a track's box (x, y centre, w, h)."""
+    tx0, ty0 = track["x"] - track["w"] / 2, track["y"] - track["h"] / 2
+    ix = max(0.0, min(box["x"] + box["w"], tx0 + track["w"]) - max(box["x"], tx0))
+    iy = max(0.0, min(box["y"] + box["h"], ty0 + track["h"]) - max(box["y"], ty0))
+    inter = ix * iy
+    union = box["w"] * box["h"] + track["w"] * track["h"] - inter
+    return float(inter / union) if union > 0 else 0.0

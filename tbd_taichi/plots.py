@@ -13,6 +13,7 @@ from .errors import InputError
 
 TRAIL = 30  # frames of trail drawn behind each track in the video
 BOX = 6  # half-size of the box around a track, px
+LEGEND_TRACKS = 8  # the plot's legend names the longest tracks only; every track's id is written beside its trail
 
 
 def track_colour(track_id: int) -> tuple[int, int, int]:
@@ -30,7 +31,8 @@ def to_display(frame: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 def plot_tracks(max_projection: np.ndarray, tracks: np.ndarray, path, truth: np.ndarray | None = None,
                 title: str = "") -> None:
-    """PNG: tracks (one colour each, id at the start) over the sequence's max-projection, truth in green."""
+    """Picture (PNG, PDF or SVG by ``path``'s suffix): tracks (one colour each, the id beside each trail's end)
+    over the sequence's max-projection, truth in green; the legend lists the :data:`LEGEND_TRACKS` longest."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -42,11 +44,17 @@ def plot_tracks(max_projection: np.ndarray, tracks: np.ndarray, path, truth: np.
         for tid in np.unique(truth["target_id"]):
             t = truth[truth["target_id"] == tid]
             ax.plot(t["x"], t["y"], "-", color="lime", lw=2, alpha=0.6, label="truth" if tid == truth["target_id"][0] else None)
-    for tid in np.unique(tracks["track_id"]):
+    ids, lengths = np.unique(tracks["track_id"], return_counts=True)
+    in_legend = set(ids[np.argsort(-lengths, kind="stable")[:LEGEND_TRACKS]].tolist())
+    for tid in ids:
         t = tracks[tracks["track_id"] == tid]
         b, g, r = track_colour(tid)
-        ax.plot(t["x"], t["y"], ".-", color=(r / 255, g / 255, b / 255), ms=3, lw=1, label=f"track {tid}")
-        ax.annotate(str(tid), (t["x"][0], t["y"][0]), color="yellow", fontsize=9)
+        label = f"track {tid} ({len(t)} frames)" if tid in in_legend else None
+        ax.plot(t["x"], t["y"], ".-", color=(r / 255, g / 255, b / 255), ms=3, lw=1, label=label)
+        ax.annotate(str(tid), (t["x"][-1], t["y"][-1]), xytext=(4, 4), textcoords="offset points",
+                    color=(r / 255, g / 255, b / 255), fontsize=8)  # the id beside its trail's end
+    if len(ids) > LEGEND_TRACKS:
+        ax.plot([], [], " ", label=f"+ {len(ids) - LEGEND_TRACKS} shorter tracks (ids on the image)")
     ax.set_title(title or "tracks over the max-projection (x = column, y = row)")
     if len(tracks) or truth is not None:
         ax.legend(loc="lower right", fontsize=8)

@@ -12,3 +12,58 @@ def progress_bar(label: str, enabled: bool, transient: bool = False):
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), transient=transient)
+
+
+PLAIN_EVERY = 5.0  # s between plain progress lines
+
+
+class PlainProgress:
+    """Progress for a log file: one line on ``stream`` every :data:`PLAIN_EVERY` seconds (done/total, the rate
+    over the last interval, time left at that rate), nothing for a run shorter than that."""
+
+    def __init__(self, label: str, total: int | None, stream=None, every: float = PLAIN_EVERY):
+        import sys
+        import time
+
+        self.label, self.total, self.every = label, total, every
+        self.stream = stream if stream is not None else sys.stderr
+        self._clock = time.monotonic
+        self.started = self.last = self._clock()
+        self.done = self._last_done = 0
+
+    def advance(self, n: int = 1) -> None:
+        self.done += n
+        now = self._clock()
+        if now - self.last < self.every:
+            return
+        rate = (self.done - self._last_done) / max(now - self.last, 1e-9)  # over the last interval: start-up excluded
+        self.last, self._last_done = now, self.done
+        of = f"/{self.total}" if self.total else ""
+        left = f", {(self.total - self.done) / rate:.0f} s left" if self.total and rate > 0 else ""
+        print(f"{self.label}: {self.done}{of} frames, {rate:.1f} frames/s{left}", file=self.stream, flush=True)
+
+
+@contextlib.contextmanager
+def frame_progress(label: str, total: int | None, mode: str = "auto"):
+    """Progress over ``total`` frames as an object with ``advance()``: ``bar`` a rich bar, ``lines`` plain lines
+    (:class:`PlainProgress`), ``off`` nothing, ``auto`` a bar when stderr is a terminal and lines otherwise."""
+    import sys
+
+    if mode == "auto":
+        mode = "bar" if sys.stderr.isatty() else "lines"
+    if mode == "off":
+        yield PlainProgress(label, total, every=float("inf"))
+    elif mode == "lines":
+        yield PlainProgress(label, total)
+    else:
+        with progress_bar(label, True, transient=True) as bar:
+            task = bar.add_task("frames", total=total)
+            yield _BarAdvance(bar, task)
+
+
+class _BarAdvance:
+    def __init__(self, bar, task):
+        self.bar, self.task = bar, task
+
+    def advance(self, n: int = 1) -> None:
+        self.bar.advance(self.task, n)

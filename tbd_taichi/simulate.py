@@ -132,18 +132,21 @@ def render_psf(image: np.ndarray, x: float, y: float, intensity: float, psf_sigm
 
 
 def _check(shape, n_frames, snr, targets, speed, q1, q2, psf_sigma, noise_sigma, motion):
+    from .validate import memory_guard, positive, whole
+
     if len(shape) != 2 or min(shape) < 1:
         raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape}")
-    if n_frames < 1:
-        raise ParameterError(f"frames must be ≥ 1, got {n_frames}")
-    checks = {"snr": snr >= 0, "targets": targets >= 0, "q1": q1 >= 0, "q2": q2 >= 0,
-              "psf_sigma": psf_sigma > 0, "noise_sigma": noise_sigma > 0,
-              "speed": 0 <= speed[0] <= speed[1]}
-    for name, ok in checks.items():
-        if not ok:
-            raise ParameterError(f"invalid {name}")
+    whole("frames", n_frames, 1)
+    whole("targets", targets, 0)
+    for name, value in (("snr", snr), ("q1", q1), ("q2", q2)):
+        positive(name, value, 0.0, closed=True)
+    positive("psf_sigma", psf_sigma)
+    positive("noise_sigma", noise_sigma)
+    if not 0 <= speed[0] <= speed[1]:
+        raise ParameterError(f"speed must be (low, high) with 0 ≤ low ≤ high px/frame, got {speed}")
     if motion not in ("stay", "transit"):
         raise ParameterError(f"motion must be 'stay' or 'transit', got {motion!r}")
+    memory_guard(f"simulating {n_frames} frames of {shape[0]}x{shape[1]}", n_frames * shape[0] * shape[1] * 12)
 
 
 def simulate(shape=(200, 200), frames: int = 150, snr: float = 2.0, targets: int = 1, seed: int = 0, *,

@@ -76,27 +76,64 @@ def write_csv(table: np.ndarray, path) -> None:
         out.write(table)
 
 
-def read_csv(path, columns: tuple[str, ...]) -> np.ndarray:
-    """Read a CSV with (at least) ``columns``, in any order; raises InputError naming the problem."""
+def _header_and_rows(path: Path):
+    """(header, DictReader) of a text CSV; a binary or undecodable file is an InputError."""
+    try:
+        handle = open(path, newline="", encoding="utf-8")
+        head = handle.read(4096)
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text CSV file (it holds binary data)") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror})") from None
+    if "\0" in head:
+        handle.close()
+        raise InputError(f"{path}: not a text CSV file (it holds binary data)")
+    handle.seek(0)
+    reader = csv.DictReader(handle)
+    return handle, reader
+
+
+def read_header(path) -> list[str]:
+    """The column names of a CSV file (its first line)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
-    with open(path, newline="") as handle:
-        reader = csv.DictReader(handle)
-        header = reader.fieldnames or []
-        missing = [c for c in columns if c not in header]
-        if missing:
-            raise InputError(f"{path}: missing column(s) {', '.join(missing)}; expected header {','.join(columns)}")
-        rows = []
-        for line, record in enumerate(reader, start=2):
-            try:
-                rows.append(tuple(float(record[c]) for c in columns))
-            except (TypeError, ValueError):
-                raise InputError(f"{path}: line {line} has a value that is not a number") from None
-    table = make_table(rows, _dtype(columns))
-    if len(table) and not np.isfinite(np.stack([table[c] for c in columns]).astype(float)).all():
-        raise InputError(f"{path}: NaN or inf values")
-    return table
+    handle, reader = _header_and_rows(path)
+    with handle:
+        try:
+            return [c.strip() for c in (reader.fieldnames or [])]
+        except (UnicodeDecodeError, csv.Error):
+            raise InputError(f"{path}: not a readable CSV file") from None
+
+
+def read_csv(path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> np.ndarray:
+    """Read a CSV with (at least) ``columns``, in any order, and those of ``optional`` it has (0 where it has not);
+    raises InputError naming the problem and the first bad line."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    handle, reader = _header_and_rows(path)
+    with handle:
+        try:
+            header = [c.strip() for c in (reader.fieldnames or [])]
+            reader.fieldnames = header
+            missing = [c for c in columns if c not in header]
+            if missing:
+                raise InputError(f"{path}: missing column(s) {', '.join(missing)}; expected header "
+                                 f"{','.join(columns + optional)}")
+            present = columns + tuple(c for c in optional if c in header)
+            rows = []
+            for line, record in enumerate(reader, start=2):
+                try:
+                    values = {c: float(record[c]) for c in present}
+                except (TypeError, ValueError):
+                    raise InputError(f"{path}: line {line} has a value that is not a number") from None
+                if not all(np.isfinite(v) for v in values.values()):
+                    raise InputError(f"{path}: line {line} has a NaN or infinite value")
+                rows.append(tuple(values.get(c, 0.0) for c in columns + optional))
+        except (UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"{path}: not a readable CSV file ({type(exc).__name__})") from None
+    return make_table(rows, _dtype(columns + optional))
 
 
 def read_tracks(path) -> np.ndarray:
@@ -105,10 +142,21 @@ def read_tracks(path) -> np.ndarray:
 
 
 def read_truth(path) -> np.ndarray:
-    """Truth CSV ``frame,target_id,x,y,vx,vy,intensity``."""
-    return read_csv(path, TRUTH_COLUMNS)
+    """Point truth CSV ``frame,target_id,x,y[,vx,vy,intensity]`` (the missing optional columns read as 0)."""
+    return read_csv(path, TRUTH_COLUMNS[:4], TRUTH_COLUMNS[4:])
 
 
 def read_boxes(path) -> np.ndarray:
-    """A target-box CSV (frame,x,y,w,h[,…]): one labelled box per row, corner and size in px."""
-    return read_csv(path, BOX_COLUMNS)
+    """A target-box CSV (frame,x,y,w,h[,target_id,…]): one labelled box per row, corner and size in px."""
+    return read_csv(path, BOX_COLUMNS, ("target_id",))
+
+
+def read_any_truth(path) -> tuple[str, np.ndarray]:
+    """("points", :func:`read_truth`) or ("boxes", :func:`read_boxes`), by the file's header: boxes have w and h."""
+    header = set(read_header(path))
+    if {"w", "h"} <= header:
+        return "boxes", read_boxes(path)
+    if not {"frame", "x", "y"} <= header:
+        raise InputError(f"{path}: truth needs the columns frame,target_id,x,y (points) or frame,x,y,w,h (boxes); "
+                         f"it has {','.join(sorted(header)) or 'no header'}")
+    return "points", read_truth(path)

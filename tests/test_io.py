@@ -14,13 +14,21 @@ def seq(rng):
     return rng.integers(0, 255, size=(6, 17, 23)).astype(np.uint8)
 
 
-@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, bool])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64])
 def test_npy_any_real_dtype(tmp_path, seq, dtype):
     data = (seq.astype(np.int64) * (200 if dtype == np.uint16 else 1)).astype(dtype)
     np.save(tmp_path / "a.npy", data)
     out = io.read_frames(tmp_path / "a.npy")
     assert out.dtype == np.float32 and out.shape == (6, 17, 23)
     np.testing.assert_array_equal(out, data.astype(np.float32))
+
+
+@pytest.mark.parametrize("dtype", [bool, np.complex64])
+def test_npy_of_no_real_number_type_is_refused(tmp_path, seq, dtype):
+    """A mask or a complex array is not an image sequence (it was once tracked silently as 0/1 frames)."""
+    np.save(tmp_path / "a.npy", seq.astype(dtype))
+    with pytest.raises(InputError, match=rf"a\.npy: dtype {np.dtype(dtype)} is not a real number type"):
+        io.read_frames(tmp_path / "a.npy")
 
 
 def test_npz_frames(tmp_path, seq):

@@ -169,7 +169,7 @@ def test_init_box_reaches_a_method_that_needs_one():
             tbd.make_tracker("boxtest", (40, 48), init_box=(60, 2, 4, 4))
         with pytest.raises(ParameterError, match="W, H > 0"):
             tbd.make_tracker("boxtest", (40, 48), init_box=(1, 2, 0, 4))
-        tbd.make_tracker("boxtest", (40, 48), init_box=("10.5", 3, 6, 4))
+        tbd.make_tracker("boxtest", (40, 48), init_box=("10.5", 3, 6, 4)).tracker  # built (auto: lazily)
         assert seen["box"] == (10.5, 3.0, 6.0, 4.0)
     finally:
         methods.unregister("boxtest")

@@ -109,33 +109,60 @@ def checked_init_box(spec: MethodSpec, init_box, shape) -> tuple[float, float, f
 
 
 def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arch: str | None = None,
-                 init_box=None, **kw) -> Tracker:
+                 init_box=None, profile: str = "auto", **kw) -> Tracker:
     """A streaming tracker of method ``name`` for frames of ``shape`` (H, W).
 
     ``kw``: the method's parameters by name (``tbd-taichi track --method NAME --help-params`` lists them;
     ``snr`` chooses presets where the paper has them) and its run options (for sgds: background, bad_pixels,
-    history, frontend_process).  An unknown name, parameter or out-of-range value is a ParameterError."""
+    history, frontend_process).  ``profile`` (:mod:`tbd_taichi.profiles`): ``auto`` (the real-video settings for
+    integer-typed frames, decided at the first frame), ``paper`` or ``real-video``; ``kw`` wins over it.  An
+    unknown name, parameter or out-of-range value is a ParameterError."""
+    from ..profiles import check_profile, profile_settings
+    from ..validate import tracker_memory
+    from .profiled import ProfiledTracker
+
     spec = get(name)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ParameterError(f"seed must be a whole number ≥ 0, got {seed!r}")
     check_engine(engine)
+    check_profile(profile)
     if len(tuple(shape)) != 2:
         raise ParameterError(f"shape must be (H, W), got {shape!r}")
     shape = (int(shape[0]), int(shape[1]))
-    overrides, options = split_options(spec, kw)
-    params = spec.make_params(shape, **overrides)
+    if min(shape) < 1:
+        raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape!r}")
     box = checked_init_box(spec, init_box, shape)
-    return spec.factory(shape, params, seed=int(seed), engine=engine, arch=arch, init_box=box, **options)
+    split_options(spec, kw)  # unknown names fail here, before anything is built
+
+    def checked(chosen: str) -> tuple:
+        """(params, options) under profile ``chosen``, in range and within the memory there is."""
+        overrides, options = split_options(spec, {**profile_settings(spec, chosen), **kw})
+        params = spec.make_params(shape, **overrides)
+        tracker_memory(f"a {name} tracker for {shape[0]}x{shape[1]} frames", shape,
+                       lambda: spec.particle_count(shape, params) if spec.particle_count else 0)
+        return params, options
+
+    def build(chosen: str):
+        params, options = checked(chosen)
+        return spec.factory(shape, params, seed=int(seed), engine=engine, arch=arch, init_box=box, **options)
+
+    if profile == "auto":  # checked now, though the tracker is built at the first frame
+        checked("paper")
+    return ProfiledTracker(build, profile, name)
 
 
 def track(frames_or_path, method: str = "sgds", **kw) -> np.ndarray:
     """Run method ``method`` over a whole sequence (array (T, H, W) or anything ``tbd_taichi.io`` reads) and
-    return its tracks table; ``kw`` as :func:`make_tracker` takes them."""
+    return its tracks table; ``kw`` as :func:`make_tracker` takes them (``profile="auto"`` decides by the input:
+    a video, a folder of images or integer frames get the real-video settings)."""
     from .. import io
+
+    from ..profiles import resolved_profile
 
     spec = get(method)
     source = io.open_frames(frames_or_path)
-    tracker = make_tracker(method, source.shape, **kw)
+    profile, _ = resolved_profile(kw.pop("profile", "auto"), source.kind, source.dtype)
+    tracker = make_tracker(method, source.shape, profile=profile, **kw)
     for frame in io.iter_frames(source, min_frames=spec.min_frames):
         tracker.update(frame)
     return tracker.finish()

@@ -23,7 +23,7 @@ from .sgds.params import snr_band
 from ..particles import ParticlePool
 from ..simulate import intensity_for_snr
 from ..tables import TRACK_DTYPE, make_table
-from .registry import MethodSpec, keyword_factory, param, validate_params
+from .registry import MethodSpec, OneSequence, keyword_factory, param, validate_params
 
 # SGDS-PF Table 3, original PF particle numbers by SNR band [2,∞), [1.8,2), [1.6,1.8), [1.4,1.6), (0,1.4)
 TABLE3 = {50: (10_000, 14_000, 18_000, 24_000, 30_000), 200: (14_000, 20_000, 25_000, 30_000, 60_000)}
@@ -75,7 +75,7 @@ class PFParams:
     systematic: bool = param(False, doc="systematic instead of multinomial resampling", source="Eq. 18")
 
 
-class OriginalPF:
+class OriginalPF(OneSequence):
     """Single-target PF-TBD over a frame stream.
 
     ``update(frame)`` takes one raw frame, normalises it, steps the filter and returns the
@@ -119,6 +119,7 @@ class OriginalPF:
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; returns [(frame, track_id, x, y, vx, vy, intensity, p_exist)] if declared."""
+        self._check_open("update")
         t0 = time.perf_counter()
         z = self.preprocess(frame, self.frame)
         t1 = time.perf_counter()
@@ -143,6 +144,7 @@ class OriginalPF:
 
     def finish(self) -> np.ndarray:
         """Every declared row as a tracks table."""
+        self._close_sequence()
         return make_table(self.rows, TRACK_DTYPE)
 
 
@@ -166,5 +168,7 @@ SPEC = MethodSpec(
     options=("background", "bad_pixels"),
     aliases={"snr": "snr", "particles": "n_particles", "threshold": "threshold"},
     rank=1, particle_count=pf_particles,
-    assumes="one point target (Gaussian PSF, Σ = 0.7 px) moving ≤ 1 px/frame, noise normalised to σ = 1",
+    assumes=("one point target at a time (Gaussian PSF, Σ = 0.7 px), nearly constant velocity ≤ 1 px/frame; peak "
+             "SNR ≥ snr (1.4; Table 3 particles for it); background: paper profile the frame's median, white "
+             "Gaussian noise of σ from the MAD; real-video profile a spatiotemporal background and local σ, snr 5"),
 )

@@ -38,6 +38,21 @@ class Tracker(Protocol):
         """Cumulative wall seconds per stage (the benchmark's rows)."""
 
 
+class OneSequence:
+    """A tracker of one sequence: ``update`` after ``finish``, or a second ``finish``, is a ParameterError (the
+    tracker's state is spent; a new sequence takes a new tracker)."""
+
+    _finished = False
+
+    def _check_open(self, what: str) -> None:
+        if self._finished:
+            raise ParameterError(f"{type(self).__name__}: {what} after finish; make a new tracker for a new sequence")
+
+    def _close_sequence(self) -> None:
+        self._check_open("finish")
+        self._finished = True
+
+
 @dataclass(frozen=True)
 class Range:
     """The valid values of a parameter: an interval (ends open or closed, either may be absent), optionally
@@ -251,6 +266,11 @@ class MethodSpec:
         lines = [f"{self.name}: {self.title} ({self.paper})", self.description]
         if self.assumes:
             lines.append(f"defaults assume: {self.assumes}")
+        from ..profiles import profile_settings
+
+        real = profile_settings(self, "real-video")
+        lines.append("profiles: paper = the defaults below; real-video (auto's choice for videos, image folders and "
+                     "integer frames) = " + (", ".join(f"{k}={v}" for k, v in real.items()) or "the same"))
         lines.append("")
         for r in rows:
             lines.append("  ".join(c.ljust(w) for c, w in zip(r[:5], widths)) + "  " + r[5])

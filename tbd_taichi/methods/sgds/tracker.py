@@ -45,6 +45,7 @@ from ...tables import TRACK_DTYPE, make_table
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
                            icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, nearest_pixel,
                            peak_z, PEAK_RHO, scef, update_confidence, windowed_icef, within_duplicate_radius)
+from ..registry import OneSequence
 from .params import SGDSParams
 from .populations import eliminated_per_population, resize_population, slab_populations
 from .searching_pool import SearchingPool
@@ -53,7 +54,7 @@ MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
 
 
-class SGDSPF:
+class SGDSPF(OneSequence):
     """Streaming SGDS-PF tracker.
 
     ``tracker = SGDSPF((H, W), snr=1.4, seed=0, engine="taichi", arch=None, **params)``;
@@ -126,6 +127,7 @@ class SGDSPF:
     def update(self, frame) -> list[tuple]:
         """Add one raw frame; returns the confirmed rows (frame, track_id, x, y, vx, vy, I, C) of the
         frame finished now (frame t − 2, or t − 3 with ``frontend_process``), or [] before that."""
+        self._check_open("update")
         t0 = time.perf_counter()
         done = self.front.push(frame)
         self._front_clock(t0)
@@ -135,6 +137,7 @@ class SGDSPF:
         """Process the last frames and return the tracks table of every confirmed track's whole path."""
         if self.frames_in < MIN_FRAMES:
             raise InputError(f"{self.frames_in} frame(s), but SGDS-PF needs at least {MIN_FRAMES}")
+        self._close_sequence()
         t0 = time.perf_counter()
         done = self.front.finish()
         self._front_clock(t0)
@@ -163,8 +166,17 @@ class SGDSPF:
             self._clock("waiting", t0)
 
     def whole_paths(self) -> np.ndarray:
+        """Each reported track's whole path: from its first frame (before its confirmation) on; with
+        ``min_peak_z`` > 0, from the first to the last frame it was reported in (the gaps between filled), since
+        the guard judges the stretches before and after as too faint to report (docs/methods/sgds.md#real-video)."""
+        def kept(t: Track):
+            if self.p.min_peak_z <= 0:
+                return t.path
+            first, last = t.reported_span
+            return (row for row in t.path if first <= row[0] <= last)
+
         rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.reported
-                for (f, x, y, vx, vy, i, c) in t.path]
+                for (f, x, y, vx, vy, i, c) in kept(t)]
         return make_table(rows, TRACK_DTYPE)
 
     def online(self) -> np.ndarray:
@@ -358,6 +370,9 @@ class SGDSPF:
             t.peak_z += PEAK_RHO * (value - t.peak_z)
         ok = t.confirmed and t.peak_z >= self.p.min_peak_z
         t.reported = t.reported or ok
+        if ok:
+            frame = t.path[-1][0]
+            t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
         return ok
 
     def _merge_duplicates(self) -> None:
