@@ -1,7 +1,7 @@
 """Real infrared video end to end: SGDS-PF on a drone clip, scored against its labels, with an overlay video.
 
 Runs SGDS-PF with the real-video settings ``tbd_taichi.background.REAL_VIDEO`` (spatiotemporal
-background suppression, snr 5 preset, tracks reported from a running peak z of 15; otherwise
+background suppression, snr 5 preset, tracks reported from a running peak z of 16; otherwise
 defaults) over a clip of the drone-ir set (CC0; IR_DRONE_021 ships in tests/data),
 prints the detection rate, false points per frame and frames to first confirmation, and
 writes the tracks CSV and an overlay video with each confirmed track.
