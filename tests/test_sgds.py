@@ -484,12 +484,13 @@ def test_min_peak_z_reports_only_tracks_that_bright():
     for gate in (0.0, 2.0, 2.5, 4.0):
         tracker = SGDSPF((50, 50), snr=3.0, seed=5, min_peak_z=gate)
         rows[gate] = [row for frame in scene.frames for row in tracker.update(frame)]
-        whole[gate] = len(tracker.finish())
+        whole[gate] = tracker.finish()
     assert len(rows[0.0]) > 15 and rows[2.0] == rows[0.0]
     later = rows[2.5]
     assert 0 < len(later) < len(rows[0.0]) and later == rows[0.0][-len(later):]
-    assert whole[2.5] == len(later) < whole[0.0]  # the reported span, gaps filled (none here)
-    assert rows[4.0] == [] and whole[4.0] == 0
+    span = whole[2.5]  # the whole path from its first report on (finish's rows included)
+    assert len(later) <= len(span) < len(whole[0.0]) and span.tobytes() == whole[0.0][-len(span):].tobytes()
+    assert rows[4.0] == [] and len(whole[4.0]) == 0
     with pytest.raises(tbd.ParameterError, match="min_peak_z"):
         SGDSPF((50, 50), min_peak_z=-1.0)
 
