@@ -17,7 +17,6 @@ from .errors import TBDError
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
              "(a GPU if there is one, else the CPU)")
-SIMULATE_BYTES = 4 * 3  # a simulated frame pixel: float32 frames plus the noise and signal being summed, bytes
 number, whole, positive = validate.cli_number, validate.whole, validate.positive
 
 
@@ -40,9 +39,9 @@ def _truth_csv_path(out: Path) -> Path:
 
 def check_simulate(args) -> None:
     """The shape (sides ≥ 8), the memory the frames need, and the two output files."""
-    shape = validate.frame_shape("--shape", args.shape)
-    validate.memory_guard(f"simulate --shape {shape[0]} {shape[1]} --frames {args.frames}",
-                          shape[0] * shape[1] * args.frames * SIMULATE_BYTES)
+    from .simulate import check_memory
+
+    check_memory(validate.frame_shape("--shape", args.shape), args.frames)
     out = validate.output_path("--out", args.out, (".npz",))
     validate.output_path("--out (its truth CSV)", _truth_csv_path(out))
 
@@ -69,14 +68,8 @@ def check_evaluate(args) -> tuple[np.ndarray, tuple[str, np.ndarray]]:
 
 def cmd_evaluate(args) -> int:
     tracks, (kind, truth) = args.checked
-    if kind == "boxes":
-        n_frames = args.frames or int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
-        scores = dict(truth="boxes", box_margin=args.box_margin,
-                      **metrics.box_scores(tracks, truth, n_frames, grow=args.box_margin))
-    else:
-        scores = metrics.evaluate(tracks, truth, t0=args.t0, ospa_c=args.ospa_c, ospa_p=args.ospa_p,
-                                  n_frames=args.frames)
-        scores.update(truth="points", t0=args.t0, ospa_c=args.ospa_c, ospa_p=args.ospa_p)
+    scores = metrics.truth_scores(kind, tracks, truth, args.frames, box_margin=args.box_margin, t0=args.t0,
+                                  ospa_c=args.ospa_c, ospa_p=args.ospa_p)
     print(json.dumps(scores, allow_nan=True) if args.json else format_scores(scores))
     return 0
 
@@ -106,7 +99,7 @@ def check_bench(args) -> list[str]:
         spec.make_params(shape)
     frames_as_particles = shape[0] * shape[1] * args.frames * 4 // validate.PARTICLE_BYTES  # the simulated frames
     validate.tracker_memory(f"bench --shape {shape[0]} {shape[1]} ({len(engines)} engine(s))", shape,
-                            lambda: (spec.particle_count(shape, params) if spec.particle_count else 0) * len(engines)
+                            lambda: spec.particles(shape, params) * len(engines)
                             + args.particles + frames_as_particles)
     return engines
 

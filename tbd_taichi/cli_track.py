@@ -194,15 +194,12 @@ def plan_track(args) -> TrackPlan | None:
     source = io.open_frames(args.input)
     validate.frame_shape(f"{source.name}: frame size", source.shape)
     io.check_length(source, spec.min_frames)
-    if source.n_frames is not None and Path(args.input).resolve() == out.resolve():
+    if Path(args.input).resolve() == out.resolve():
         raise TBDError(f"--out {out} is the input; give another path")
     profile, why = resolved_profile(requested_profile(args), source.kind, source.dtype)
     settings = {**profile_settings(spec, profile), **flagged}
     methods.checked_init_box(spec, init_box, source.shape)
-    overrides, _ = methods.split_options(spec, settings)
-    params = spec.make_params(source.shape, **overrides)  # every value in range, before any work
-    validate.tracker_memory(f"{spec.name} on {source.shape[0]}x{source.shape[1]} frames", source.shape,
-                            lambda: spec.particle_count(source.shape, params) if spec.particle_count else 0)
+    methods.checked_settings(spec, source.shape, settings)  # every value in range, and the memory, before any work
     return TrackPlan(spec, source, settings, profile, why, init_box, out, truth, outputs, flagged)
 
 
@@ -247,19 +244,6 @@ def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, fl
     return final, frames, busy, max_projection
 
 
-def truth_scores(plan: TrackPlan, tracks: np.ndarray, n_frames: int, margin: float) -> dict | None:
-    """Scores against the truth: point metrics (DSR, EDT, false tracks, OSPA) or box metrics (detection rate,
-    false points per frame, centre error, IoU)."""
-    if plan.truth is None:
-        return None
-    kind, truth = plan.truth
-    if kind == "boxes":
-        return dict(truth="boxes", box_margin=margin, **metrics.box_scores(tracks, truth, n_frames, grow=margin))
-    scores = metrics.evaluate(tracks, truth, n_frames=n_frames)
-    scores.update(truth="points", t0=metrics.T0, ospa_c=metrics.OSPA_C, ospa_p=metrics.OSPA_P)
-    return scores
-
-
 def box_centres(boxes: np.ndarray) -> np.ndarray:
     """Box truth as point truth for the plot: each box's centre (x + w/2, y + h/2, as box_scores takes it)."""
     ids = boxes["target_id"] if "target_id" in boxes.dtype.names else np.zeros(len(boxes))
@@ -299,8 +283,10 @@ def cmd_track(args) -> int:
         final, frames, busy, max_projection = run_tracker(plan, args, writer, say)
     tracks = tables.read_tracks(plan.out) if plan.streamed else final  # streamed rows live only in the file
     n_tracks = len(np.unique(tracks["track_id"]))
-    scores = truth_scores(plan, tracks, frames, args.box_margin)
-    if scores is not None:
+    scores = None
+    if plan.truth is not None:
+        kind, truth = plan.truth
+        scores = metrics.truth_scores(kind, tracks, truth, frames, box_margin=args.box_margin)
         say(format_scores(scores))
     if plan.outputs["plot"]:
         from .plots import plot_tracks

@@ -244,3 +244,18 @@ def box_iou(box, track) -> float:
     inter = ix * iy
     union = box["w"] * box["h"] + track["w"] * track["h"] - inter
     return float(inter / union) if union > 0 else 0.0
+
+
+def truth_scores(kind: str, tracks: np.ndarray, truth: np.ndarray, n_frames: int | None = None, *,
+                 box_margin: float = BOX_MARGIN, t0: float = T0, ospa_c: float = OSPA_C,
+                 ospa_p: float = OSPA_P) -> dict:
+    """The report against truth of ``kind`` (:func:`~tbd_taichi.tables.read_any_truth`), with its settings:
+    ``points``, :func:`evaluate`; ``boxes``, :func:`box_scores` over ``n_frames`` frames (default: the last frame
+    in either table + 1)."""
+    if kind == "boxes":
+        if n_frames is None:
+            n_frames = int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
+        return dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, n_frames, grow=box_margin))
+    scores = evaluate(tracks, truth, t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, n_frames=n_frames)
+    scores.update(truth="points", t0=t0, ospa_c=ospa_c, ospa_p=ospa_p)
+    return scores

@@ -132,7 +132,7 @@ def render_psf(image: np.ndarray, x: float, y: float, intensity: float, psf_sigm
 
 
 def _check(shape, n_frames, snr, targets, speed, q1, q2, psf_sigma, noise_sigma, motion):
-    from .validate import memory_guard, positive, whole
+    from .validate import positive, whole
 
     if len(shape) != 2 or min(shape) < 1:
         raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape}")
@@ -146,7 +146,17 @@ def _check(shape, n_frames, snr, targets, speed, q1, q2, psf_sigma, noise_sigma,
         raise ParameterError(f"speed must be (low, high) with 0 ≤ low ≤ high px/frame, got {speed}")
     if motion not in ("stay", "transit"):
         raise ParameterError(f"motion must be 'stay' or 'transit', got {motion!r}")
-    memory_guard(f"simulating {n_frames} frames of {shape[0]}x{shape[1]}", n_frames * shape[0] * shape[1] * 12)
+    check_memory(shape, n_frames)
+
+
+PIXEL_BYTES = 12  # a simulated pixel: the float32 frames plus the noise and the signal being summed, bytes
+
+
+def check_memory(shape, n_frames: int) -> None:
+    """Refuse a sequence of ``n_frames`` frames of ``shape`` that cannot fit in memory (before any is made)."""
+    from .validate import memory_guard
+
+    memory_guard(f"simulating {n_frames} frames of {shape[0]}x{shape[1]}", n_frames * shape[0] * shape[1] * PIXEL_BYTES)
 
 
 def simulate(shape=(200, 200), frames: int = 150, snr: float = 2.0, targets: int = 1, seed: int = 0, *,

@@ -202,7 +202,7 @@ def configured_particles(method: str, side: int, preset: float) -> int:
 
     spec = methods.get(method)
     shape = (side, side)
-    return spec.particle_count(shape, spec.make_params(shape, snr=preset)) if spec.particle_count else 0
+    return spec.particles(shape, spec.make_params(shape, snr=preset))
 
 
 def markdown_table(rows: list[dict]) -> str:

@@ -10,6 +10,7 @@ Coordinates everywhere: x = column, y = row, 0-based, pixel centres at integers;
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 from pathlib import Path
 
@@ -76,8 +77,13 @@ def write_csv(table: np.ndarray, path) -> None:
         out.write(table)
 
 
-def _header_and_rows(path: Path):
-    """(header, DictReader) of a text CSV; a binary or undecodable file is an InputError."""
+@contextlib.contextmanager
+def _csv_records(path):
+    """(header, DictReader keyed by the stripped header) of a text CSV; a missing, binary, undecodable or
+    malformed file is an InputError naming it."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
     try:
         handle = open(path, newline="", encoding="utf-8")
         head = handle.read(4096)
@@ -85,54 +91,42 @@ def _header_and_rows(path: Path):
         raise InputError(f"{path}: not a text CSV file (it holds binary data)") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot be read ({exc.strerror})") from None
-    if "\0" in head:
-        handle.close()
-        raise InputError(f"{path}: not a text CSV file (it holds binary data)")
-    handle.seek(0)
-    reader = csv.DictReader(handle)
-    return handle, reader
+    with handle:
+        if "\0" in head:
+            raise InputError(f"{path}: not a text CSV file (it holds binary data)")
+        handle.seek(0)
+        reader = csv.DictReader(handle)
+        try:
+            reader.fieldnames = [c.strip() for c in (reader.fieldnames or [])]
+            yield reader.fieldnames, reader
+        except (UnicodeDecodeError, csv.Error) as exc:
+            raise InputError(f"{path}: not a readable CSV file ({type(exc).__name__})") from None
 
 
 def read_header(path) -> list[str]:
     """The column names of a CSV file (its first line)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    handle, reader = _header_and_rows(path)
-    with handle:
-        try:
-            return [c.strip() for c in (reader.fieldnames or [])]
-        except (UnicodeDecodeError, csv.Error):
-            raise InputError(f"{path}: not a readable CSV file") from None
+    with _csv_records(path) as (header, _):
+        return header
 
 
 def read_csv(path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> np.ndarray:
     """Read a CSV with (at least) ``columns``, in any order, and those of ``optional`` it has (0 where it has not);
     raises InputError naming the problem and the first bad line."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
-    handle, reader = _header_and_rows(path)
-    with handle:
-        try:
-            header = [c.strip() for c in (reader.fieldnames or [])]
-            reader.fieldnames = header
-            missing = [c for c in columns if c not in header]
-            if missing:
-                raise InputError(f"{path}: missing column(s) {', '.join(missing)}; expected header "
-                                 f"{','.join(columns + optional)}")
-            present = columns + tuple(c for c in optional if c in header)
-            rows = []
-            for line, record in enumerate(reader, start=2):
-                try:
-                    values = {c: float(record[c]) for c in present}
-                except (TypeError, ValueError):
-                    raise InputError(f"{path}: line {line} has a value that is not a number") from None
-                if not all(np.isfinite(v) for v in values.values()):
-                    raise InputError(f"{path}: line {line} has a NaN or infinite value")
-                rows.append(tuple(values.get(c, 0.0) for c in columns + optional))
-        except (UnicodeDecodeError, csv.Error) as exc:
-            raise InputError(f"{path}: not a readable CSV file ({type(exc).__name__})") from None
+    with _csv_records(path) as (header, reader):
+        missing = [c for c in columns if c not in header]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {', '.join(missing)}; expected header "
+                             f"{','.join(columns + optional)}")
+        present = columns + tuple(c for c in optional if c in header)
+        rows = []
+        for line, record in enumerate(reader, start=2):
+            try:
+                values = {c: float(record[c]) for c in present}
+            except (TypeError, ValueError):
+                raise InputError(f"{path}: line {line} has a value that is not a number") from None
+            if not all(np.isfinite(v) for v in values.values()):
+                raise InputError(f"{path}: line {line} has a NaN or infinite value")
+            rows.append(tuple(values.get(c, 0.0) for c in columns + optional))
     return make_table(rows, _dtype(columns + optional))
 
 

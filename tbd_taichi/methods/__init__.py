@@ -84,6 +84,18 @@ def split_options(spec: MethodSpec, kw: dict) -> tuple[dict, dict]:
     return {k: v for k, v in kw.items() if k in declared}, {k: v for k, v in kw.items() if k not in declared}
 
 
+def checked_settings(spec: MethodSpec, shape: tuple[int, int], settings: dict) -> tuple:
+    """``settings`` as (params, run options) for frames of ``shape``: names known, values in range, and the
+    tracker's estimated memory within what there is (a ParameterError naming the problem otherwise)."""
+    from ..validate import tracker_memory
+
+    overrides, options = split_options(spec, settings)
+    params = spec.make_params(shape, **overrides)
+    tracker_memory(f"a {spec.name} tracker for {shape[0]}x{shape[1]} frames", shape,
+                   lambda: spec.particles(shape, params))
+    return params, options
+
+
 def checked_init_box(spec: MethodSpec, init_box, shape) -> tuple[float, float, float, float] | None:
     """The first-frame box (x, y, w, h) as floats (x = column of the left edge, 0-based), checked against the
     method and the frame ``shape``; a ParameterError if the method needs one and has none, or takes none."""
@@ -118,12 +130,11 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     integer-typed frames, decided at the first frame), ``paper`` or ``real-video``; ``kw`` wins over it.  An
     unknown name, parameter or out-of-range value is a ParameterError."""
     from ..profiles import check_profile, profile_settings
-    from ..validate import tracker_memory
+    from ..validate import whole
     from .profiled import ProfiledTracker
 
     spec = get(name)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ParameterError(f"seed must be a whole number ≥ 0, got {seed!r}")
+    seed = whole("seed", seed, 0)
     check_engine(engine)
     check_profile(profile)
     if len(tuple(shape)) != 2:
@@ -132,19 +143,13 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     if min(shape) < 1:
         raise ParameterError(f"shape must be (H, W) with H, W ≥ 1, got {shape!r}")
     box = checked_init_box(spec, init_box, shape)
-    split_options(spec, kw)  # unknown names fail here, before anything is built
 
     def checked(chosen: str) -> tuple:
-        """(params, options) under profile ``chosen``, in range and within the memory there is."""
-        overrides, options = split_options(spec, {**profile_settings(spec, chosen), **kw})
-        params = spec.make_params(shape, **overrides)
-        tracker_memory(f"a {name} tracker for {shape[0]}x{shape[1]} frames", shape,
-                       lambda: spec.particle_count(shape, params) if spec.particle_count else 0)
-        return params, options
+        return checked_settings(spec, shape, {**profile_settings(spec, chosen), **kw})
 
     def build(chosen: str):
         params, options = checked(chosen)
-        return spec.factory(shape, params, seed=int(seed), engine=engine, arch=arch, init_box=box, **options)
+        return spec.factory(shape, params, seed=seed, engine=engine, arch=arch, init_box=box, **options)
 
     if profile == "auto":  # checked now, though the tracker is built at the first frame
         checked("paper")

@@ -236,6 +236,10 @@ class MethodSpec:
     def param_infos(self) -> list[ParamInfo]:
         return param_infos(self.params)
 
+    def particles(self, shape, params) -> int:
+        """The particles a tracker of ``params`` for frames of ``shape`` is configured with (0 if it does not say)."""
+        return self.particle_count(shape, params) if self.particle_count else 0
+
     def parse_assignments(self, assignments) -> dict:
         """``["KEY=VALUE", ...]`` (``--param``) as {name: value} of the declared types; an unknown key or
         a malformed item is a ParameterError naming it and the known keys."""
