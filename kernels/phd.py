@@ -1,0 +1,383 @@
+"""Particle PHD track-before-detect kernels (Long et al. 2012, MM-PHD TBD): one particle pool for a detector and
+its trackers, each filter a *group* of consecutive slots; every step is one launch for all groups given.
+
+Slot layout (the scheduler's, ``tbd_taichi.methods.mm_phd``): group g owns slots [start_g, start_g + len_g), the
+last ``births_g`` of them newborn this frame.  A particle is the 7-D state of ``tbd_taichi.motion_models``
+(x, ẋ, y, ẏ, I, ẍ, ÿ; px, px/s, px/s²), a model index r and a PHD weight w.
+
+Steps (Eq. numbers of the paper):
+
+* :meth:`PhdKernels.propagate`: survivors switch model by Π (Eq. 31, Ξ = Π by Eq. 34) and move by
+  X ← F^(r) X + √s_g·L^(r)·n (Eq. 1; F⁻¹ in the backward recursion, Eq. 26), w ← e·w (Eq. 33 with q = f);
+  births are uniform over the thresholded cells, U[−V_max, V_max] velocity, U[I_min, I_max] intensity, r ~ β and
+  w = γ/J (Eqs. 28–30, 32–34);
+* :meth:`PhdKernels.likelihood`: the most influenced cell (Eq. 17) and the log-likelihood ratio over the
+  window |i − i0| ≤ ⌊3Σ⌋ (Eqs. 13, 18) of the pixel-integrated PSF (Eq. 4, closed form with :func:`erf`);
+* :meth:`PhdKernels.update`: Ψ per (group, cell) (Eqs. 15–16), w̃ = ℓw/(λ + Ψ) (Eq. 14), n̂ = Σ w̃ (Eq. 19)
+  and the cumulative resampling weights, ∝ ℓ (Eq. 24) or ∝ w̃;
+* :meth:`PhdKernels.estimate`: each group's w̃-weighted mean, covariance and model probabilities (Eqs. 20, 35);
+* :meth:`PhdKernels.resample`: systematic resampling of each group to its L_g particles of weight n̂_g/L_g
+  (Eqs. 20, 24), written compacted to new segments;
+* :meth:`PhdKernels.mask`: Eq. 36's detector frame, I_0 over the windows of the tracked targets.
+
+Sums within a group run serially in one thread (groups in parallel), so results do not depend on the thread
+count.  Random numbers are the counter-based ones of ``kernels.rng`` keyed on (seed, frame key, stream, slot).
+The NumPy twin is ``tbd_taichi.numpy_kernels.phd``.
+"""
+import numpy as np
+import taichi as ti
+
+from .loops import thread_span
+from .rng import NormalTables, key_prefix, normal_at, uniform_at
+
+DIM = 7
+MAX_MODELS = 4
+BETA_ROW = MAX_MODELS  # the row of model_cdf holding β
+LOG_ZERO = -1.0e30  # log ℓ of a particle outside the image
+S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
+S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
+S_RESAMPLE = 15
+SQRT_HALF = 0.7071067811865476
+GROUP_INT = ("start", "length", "births", "frame", "out_start", "out_len", "out_id")
+GROUP_FLOAT = ("qscale", "out_weight", "cx", "cy", "radius")
+START, LENGTH, BIRTHS, FRAME, OUT_START, OUT_LEN, OUT_ID = range(len(GROUP_INT))
+QSCALE, OUT_WEIGHT, CX, CY, RADIUS = range(len(GROUP_FLOAT))
+NO_CENTRE = -1.0e6  # cx of a group whose class is centred on its peak cell
+N_HAT, TOTAL = 0, 1  # columns of gout: n̂, resampling total
+EST_MEAN, EST_COV, EST_PROB = 0, DIM, DIM + DIM * DIM  # columns of est: mean (7), covariance (7×7), P_r (4)
+EST_MASS = EST_PROB + MAX_MODELS  # the PHD mass Σw̃ of the class (Eq. 19 over the class)
+EST_WIDTH = EST_MASS + 1
+_NP = {ti.f32: np.float32, ti.i32: np.int32}
+
+
+@ti.func
+def erf(x: ti.f32) -> ti.f32:
+    """erf(x) by Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5·10⁻⁷): 1 − (a₁t + … + a₅t⁵)·e^(−x²), t = 1/(1 + p|x|),
+    odd in x.  Taichi has no erf."""
+    a = ti.abs(x)
+    t = ti.f32(1.0) / (ti.f32(1.0) + ti.f32(0.3275911) * a)
+    poly = t * (ti.f32(0.254829592) + t * (ti.f32(-0.284496736) + t * (ti.f32(1.421413741)
+                + t * (ti.f32(-1.453152027) + t * ti.f32(1.061405429)))))
+    y = ti.f32(1.0) - poly * ti.exp(-a * a)
+    return ti.select(x < 0, -y, y)
+
+
+@ti.func
+def pixel_fraction(centre: ti.f32, pos: ti.f32, scale: ti.f32) -> ti.f32:
+    """Eq. 4 along one axis: the share of a unit Gaussian (σ = Σ, mean ``pos``) over the pixel [centre − ½,
+    centre + ½], ½[erf((c + ½ − pos)/(√2Σ)) − erf((c − ½ − pos)/(√2Σ))]; ``scale`` = 1/(√2Σ)."""
+    return ti.f32(0.5) * (erf((centre + ti.f32(0.5) - pos) * scale) - erf((centre - ti.f32(0.5) - pos) * scale))
+
+
+@ti.data_oriented
+class PhdKernels:
+    """The pool's fields (``capacity`` slots, ``max_groups`` groups, frames of ``shape``) and its steps."""
+
+    def __init__(self, capacity: int, max_groups: int, shape, serial: bool = False):
+        self.capacity, self.max_groups, self.shape = int(capacity), int(max_groups), (int(shape[0]), int(shape[1]))
+        h, w = self.shape
+        c, g = self.capacity, self.max_groups
+        self.state = ti.field(ti.f32, (c, DIM))
+        self.state2 = ti.field(ti.f32, (c, DIM))
+        self.model, self.model2 = ti.field(ti.i32, c), ti.field(ti.i32, c)
+        self.group, self.group2 = ti.field(ti.i32, c), ti.field(ti.i32, c)
+        self.weight, self.weight2 = ti.field(ti.f32, c), ti.field(ti.f32, c)
+        self.loglik, self.wtilde, self.cdf = ti.field(ti.f32, c), ti.field(ti.f32, c), ti.field(ti.f32, c)
+        self.cellmass = ti.field(ti.f32, c)
+        self.cell = ti.field(ti.i32, c)
+        # group tables (columns GROUP_INT, GROUP_FLOAT): input segment, births, frame (0 raw, 1 masked), output
+        # segment and new id; Q scale s_g and output weight; results n̂_g, total_g; estimates (ESTIMATE columns)
+        self.gint, self.gflt = ti.field(ti.i32, (g, len(GROUP_INT))), ti.field(ti.f32, (g, len(GROUP_FLOAT)))
+        self.gout = ti.field(ti.f32, (g, 2))
+        self.est = ti.field(ti.f32, (g, EST_WIDTH))
+        self.psi = ti.field(ti.f32, (g, h * w))
+        self.raw, self.masked = ti.field(ti.f32, (h, w)), ti.field(ti.f32, (h, w))
+        self.cells = ti.field(ti.i32, h * w)
+        self.F, self.F_inv, self.L = (ti.field(ti.f32, (MAX_MODELS, DIM, DIM)) for _ in range(3))
+        # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
+        self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
+        self.tables = NormalTables()
+        self.span = thread_span(serial)
+
+    # ------------------------------------------------------------------ propagate (Eqs. 1, 26, 28–34)
+
+    @ti.kernel
+    def propagate(self, seed: ti.u32, frame_key: ti.u32, total: ti.i32, backward: ti.i32, n_cells: ti.i32,
+                  birth: ti.types.vector(6, ti.f32)):
+        """Slots [0, total): survivors switch model and move (``backward`` ≠ 0: by F⁻¹, Eq. 26), w ← e·w; the
+        newborn slots draw Eqs. 28–30's births over ``cells[0:n_cells]``.  ``birth`` = (e, V_max, I_min, I_max,
+        γ/J, I_floor); V_max in px/s; a survivor's intensity is kept ≥ I_floor."""
+        survive, vmax, i_min, i_max, w_birth, i_floor = birth[0], birth[1], birth[2], birth[3], birth[4], birth[5]
+        k_switch = key_prefix(seed, frame_key, S_SWITCH)
+        keys = [key_prefix(seed, frame_key, S_NOISE + d) for d in ti.static(range(DIM))]
+        kb = [key_prefix(seed, frame_key, s) for s in ti.static(range(S_CELL, S_MODEL + 1))]
+        for p in range(total):
+            g = self.group[p]
+            if p >= self.gint[g, START] + self.gint[g, LENGTH] - self.gint[g, BIRTHS]:
+                c = self.cells[ti.min(ti.cast(uniform_at(kb[0], p) * n_cells, ti.i32), n_cells - 1)]
+                self.state[p, 0] = ti.cast(c % self.shape[1], ti.f32) - 0.5 + uniform_at(kb[1], p)
+                self.state[p, 2] = ti.cast(c // self.shape[1], ti.f32) - 0.5 + uniform_at(kb[2], p)
+                self.state[p, 1] = vmax * (2.0 * uniform_at(kb[3], p) - 1.0)
+                self.state[p, 3] = vmax * (2.0 * uniform_at(kb[4], p) - 1.0)
+                self.state[p, 4] = i_min + (i_max - i_min) * uniform_at(kb[5], p)
+                self.state[p, 5] = 0.0
+                self.state[p, 6] = 0.0
+                self.model[p] = self.draw(BETA_ROW, uniform_at(kb[6], p))
+                self.weight[p] = w_birth
+            else:
+                r = self.draw(self.model[p], uniform_at(k_switch, p))
+                self.model[p] = r
+                n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, keys[d], p)
+                               for d in ti.static(range(DIM))], dt=ti.f32)
+                x = ti.Vector([self.state[p, d] for d in ti.static(range(DIM))], dt=ti.f32)
+                s = ti.sqrt(self.gflt[g, QSCALE])
+                for i in ti.static(range(DIM)):
+                    acc = ti.f32(0.0)
+                    for j in ti.static(range(DIM)):
+                        f = self.F_inv[r, i, j] if backward != 0 else self.F[r, i, j]
+                        acc += f * x[j] + s * self.L[r, i, j] * n[j]
+                    self.state[p, i] = ti.max(acc, i_floor) if i == 4 else acc
+                self.weight[p] *= survive
+
+    @ti.func
+    def draw(self, row: ti.i32, u: ti.f32) -> ti.i32:
+        """The first model j with model_cdf[row, j] > u: a switch by Π's row ``row`` or a birth's by β."""
+        out = -1
+        for j in ti.static(range(MAX_MODELS)):
+            if out < 0 and u < self.model_cdf[row, j]:
+                out = j
+        return ti.max(out, 0)
+
+    # ------------------------------------------------------------------ likelihood (Eqs. 4, 13, 17, 18)
+
+    @ti.kernel
+    def likelihood(self, first: ti.i32, count: ti.i32, half: ti.template(), psf_sigma: ti.f32):
+        """Slots [first, first + count): the most influenced cell (row·W + col of the pixel holding (x, y), Eq. 17;
+        −1 outside the image) and log ℓ = Σ_window h(z − h/2) (Eq. 13 with σ_n = 1 on the normalised frame) over
+        |col − col0|, |row − row0| ≤ ``half`` = ⌊3Σ⌋ (Eq. 18), pixels outside the image left out; h is Eq. 4's
+        pixel integral, h = I·fx·fy (:func:`pixel_fraction`)."""
+        h, w = ti.static(self.shape)
+        scale = ti.f32(SQRT_HALF) / psf_sigma
+        for p in range(first, first + count):
+            x, y, inten = self.state[p, 0], self.state[p, 2], self.state[p, 4]
+            col = ti.cast(ti.floor(x + 0.5), ti.i32)
+            row = ti.cast(ti.floor(y + 0.5), ti.i32)
+            src = self.gint[self.group[p], FRAME]
+            if 0 <= col < w and 0 <= row < h:
+                fx = ti.Vector([pixel_fraction(ti.cast(col + k, ti.f32), x, scale)
+                                for k in ti.static(range(-half, half + 1))], dt=ti.f32)
+                fy = ti.Vector([pixel_fraction(ti.cast(row + k, ti.f32), y, scale)
+                                for k in ti.static(range(-half, half + 1))], dt=ti.f32)
+                acc = ti.f32(0.0)
+                for a in ti.static(range(2 * half + 1)):
+                    r = row + a - half
+                    if 0 <= r < h:
+                        for b in ti.static(range(2 * half + 1)):
+                            c = col + b - half
+                            if 0 <= c < w:
+                                hv = inten * fx[b] * fy[a]
+                                zv = self.masked[r, c] if src == 1 else self.raw[r, c]
+                                acc += hv * (zv - 0.5 * hv)
+                self.cell[p] = row * w + col
+                self.loglik[p] = acc
+            else:
+                self.cell[p] = -1
+                self.loglik[p] = LOG_ZERO
+
+    # ------------------------------------------------------------------ update (Eqs. 14–16, 19, 24)
+
+    @ti.kernel
+    def update(self, first_group: ti.i32, n_groups: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32,
+               miss: ti.f32):
+        """Groups [first_group, first_group + n_groups), each in one thread.  The measurements are the cells of
+        the group's frame with z ≥ ``th`` (§5.1's pre-segmentation; λ = 1 − Φ(Th) is their false-alarm rate).
+        With m the group's largest log ℓ and ℓ' = ℓe^(−m): Ψ'[cell] = Σ w·ℓ' over the group's particles of that
+        measurement cell (Eqs. 15–16), w̃ = wℓ'/(λe^(−m) + Ψ') = ℓw/(λ + Ψ) (Eq. 14), and w̃ = ``miss``·w
+        (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
+        cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
+        its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell.  Ψ is cleared afterwards."""
+        w = ti.static(self.shape[1])
+        span = ti.static(self.span)
+        for it in range(n_groups * span):
+            if it % span == 0:
+                g = first_group + it // span
+                a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
+                m = ti.f32(LOG_ZERO)
+                for p in range(a, b):
+                    m = ti.max(m, self.loglik[p])
+                src = self.gint[g, FRAME]
+                for p in range(a, b):
+                    if self.measured(self.cell[p], src, th, w):
+                        self.psi[g, self.cell[p]] += self.weight[p] * ti.exp(self.loglik[p] - m)
+                lam_m = lam * ti.exp(ti.min(-m, 80.0))
+                n_hat, cum = ti.f32(0.0), ti.f32(0.0)
+                for p in range(a, b):
+                    wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
+                    if self.measured(self.cell[p], src, th, w):
+                        lk = ti.exp(self.loglik[p] - m)
+                        psi = self.psi[g, self.cell[p]]
+                        mass = psi / (lam_m + psi)
+                        wt = self.weight[p] * lk / (lam_m + psi)
+                        rho = lk if on_likelihood != 0 else wt
+                    elif self.cell[p] >= 0:
+                        wt = miss * self.weight[p]
+                        rho = miss * ti.exp(self.loglik[p] - m) if on_likelihood != 0 else wt
+                    self.wtilde[p] = wt
+                    self.cellmass[p] = mass
+                    n_hat += wt
+                    cum += rho
+                    self.cdf[p] = cum
+                for p in range(a, b):
+                    if self.cell[p] >= 0:
+                        self.psi[g, self.cell[p]] = 0.0
+                self.gout[g, N_HAT] = n_hat
+                self.gout[g, TOTAL] = cum
+
+    @ti.func
+    def measured(self, cell: ti.i32, src: ti.i32, th: ti.f32, w: ti.template()) -> ti.i32:
+        """Whether ``cell`` (row·W + col; −1 outside) is a measurement: z ≥ th on frame ``src`` (0 raw, 1 masked)."""
+        out = 0
+        if cell >= 0:
+            r, c = cell // w, cell % w
+            zv = self.masked[r, c] if src == 1 else self.raw[r, c]
+            out = ti.cast(zv >= th, ti.i32)
+        return out
+
+    # ------------------------------------------------------------------ estimate (Eqs. 20, 35)
+
+    @ti.kernel
+    def estimate(self, first_group: ti.i32, n_groups: ti.i32, radius: ti.f32):
+        """Groups [first_group, first_group + n_groups), each in one thread: the target's class (§3.1) is the
+        particles within ``radius`` px (per axis) of the centre of the cell of largest PHD mass Ψ/(λ + Ψ) among
+        the group's particles inside its gate (within gflt's RADIUS of (CX, CY); every particle when CX is
+        NO_CENTRE).  Writes the class's mass Σw̃, its w̃-weighted mean and covariance and each model's w̃ share
+        (Eq. 35's L_{k,r}/L_k in expectation over the resampling); a class with Σw̃ = 0 uses equal weights, an
+        empty one gives mass 0 and a zero mean."""
+        w = ti.static(self.shape[1])
+        span = ti.static(self.span)
+        for it in range(n_groups * span):
+            if it % span == 0:
+                g = first_group + it // span
+                a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
+                gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]
+                best, peak = ti.f32(-1.0), -1
+                for p in range(a, b):
+                    inside = gx <= NO_CENTRE or (ti.abs(self.state[p, 0] - gx) <= gate
+                                                 and ti.abs(self.state[p, 2] - gy) <= gate)
+                    if self.cell[p] >= 0 and inside and self.cellmass[p] > best:
+                        best, peak = self.cellmass[p], self.cell[p]
+                cx, cy = ti.cast(peak % w, ti.f32), ti.cast(peak // w, ti.f32)
+                sw, n_in = ti.f32(0.0), 0
+                for p in range(a, b):
+                    if peak >= 0 and self.near(p, cx, cy, radius):
+                        sw += self.wtilde[p]
+                        n_in += 1
+                flat = sw <= 0.0
+                norm = ti.f32(1.0) / ti.select(flat, ti.cast(ti.max(n_in, 1), ti.f32), sw)
+                mean = ti.Vector([0.0] * DIM, dt=ti.f32)
+                probs = ti.Vector([0.0] * MAX_MODELS, dt=ti.f32)
+                for p in range(a, b):
+                    if peak >= 0 and self.near(p, cx, cy, radius):
+                        wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
+                        for d in ti.static(range(DIM)):
+                            mean[d] += wp * self.state[p, d]
+                        for r in ti.static(range(MAX_MODELS)):
+                            if self.model[p] == r:
+                                probs[r] += wp
+                cov = ti.Matrix.zero(ti.f32, DIM, DIM)
+                for p in range(a, b):
+                    if peak >= 0 and self.near(p, cx, cy, radius):
+                        wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
+                        dv = ti.Vector([self.state[p, d] - mean[d] for d in ti.static(range(DIM))], dt=ti.f32)
+                        cov += wp * dv.outer_product(dv)
+                for i in ti.static(range(DIM)):
+                    self.est[g, EST_MEAN + i] = mean[i]
+                    for j in ti.static(range(DIM)):
+                        self.est[g, EST_COV + DIM * i + j] = cov[i, j]
+                for r in ti.static(range(MAX_MODELS)):
+                    self.est[g, EST_PROB + r] = probs[r]
+                self.est[g, EST_MASS] = sw
+
+    @ti.func
+    def near(self, p: ti.i32, cx: ti.f32, cy: ti.f32, radius: ti.f32):
+        """Whether slot p lies within ``radius`` px per axis of (cx, cy)."""
+        return ti.abs(self.state[p, 0] - cx) <= radius and ti.abs(self.state[p, 2] - cy) <= radius
+
+    # ------------------------------------------------------------------ resample (Eqs. 20, 24)
+
+    @ti.kernel
+    def resample(self, seed: ti.u32, frame_key: ti.u32, n_groups: ti.i32, max_out: ti.i32):
+        """Systematic resampling: output j of group g is the first slot of g's segment whose cdf exceeds
+        (j + u_g)/L_g·total_g (u_g ~ U(0, 1) keyed on g; total_g = 0: the segment taken evenly), copied to slot
+        out_start_g + j of the second buffer with weight out_weight_g and group out_id_g."""
+        key = key_prefix(seed, frame_key, S_RESAMPLE)
+        for g, j in ti.ndrange(n_groups, max_out):
+            n_out = self.gint[g, OUT_LEN]
+            if j < n_out:
+                a, n = self.gint[g, START], self.gint[g, LENGTH]
+                src = a + (j * n) // n_out
+                if self.gout[g, TOTAL] > 0.0:
+                    target = (ti.cast(j, ti.f32) + uniform_at(key, g)) / ti.cast(n_out, ti.f32) * self.gout[g, TOTAL]
+                    lo, hi = a, a + n - 1
+                    while lo < hi:
+                        mid = (lo + hi) // 2
+                        if self.cdf[mid] > target:
+                            hi = mid
+                        else:
+                            lo = mid + 1
+                    src = lo
+                o = self.gint[g, OUT_START] + j
+                for d in ti.static(range(DIM)):
+                    self.state2[o, d] = self.state[src, d]
+                self.model2[o] = self.model[src]
+                self.weight2[o] = self.gflt[g, OUT_WEIGHT]
+                self.group2[o] = self.gint[g, OUT_ID]
+
+    @ti.kernel
+    def commit(self, total: ti.i32):
+        """Slots [0, total) of the second buffer become the pool."""
+        for p in range(total):
+            for d in ti.static(range(DIM)):
+                self.state[p, d] = self.state2[p, d]
+            self.model[p] = self.model2[p]
+            self.weight[p] = self.weight2[p]
+            self.group[p] = self.group2[p]
+
+    # ------------------------------------------------------------------ mask (Eq. 36)
+
+    @ti.kernel
+    def mask(self, centres: ti.types.ndarray(dtype=ti.f32, ndim=2), half: ti.i32, value: ti.f32):
+        """masked = raw with ``value`` (I_0) over the (2·half + 1)² window around the pixel of each row (x, y) of
+        ``centres`` (Eq. 36)."""
+        h, w = ti.static(self.shape)
+        for r, c in ti.ndrange(h, w):
+            self.masked[r, c] = self.raw[r, c]
+        for t, a, b in ti.ndrange(centres.shape[0], 2 * half + 1, 2 * half + 1):
+            r = ti.cast(ti.floor(centres[t, 1] + 0.5), ti.i32) + a - half
+            c = ti.cast(ti.floor(centres[t, 0] + 0.5), ti.i32) + b - half
+            if 0 <= r < h and 0 <= c < w:
+                self.masked[r, c] = value
+
+
+
+    # ------------------------------------------------------------------ host transfers
+
+    def put(self, name: str, values) -> None:
+        """Field ``name`` ← ``values`` (its whole shape)."""
+        field = getattr(self, name)
+        field.from_numpy(np.ascontiguousarray(values, dtype=_NP[field.dtype]))
+
+    def get(self, name: str) -> np.ndarray:
+        """A copy of field ``name``."""
+        return getattr(self, name).to_numpy()
+
+    @ti.kernel
+    def load(self, offset: ti.i32, state: ti.types.ndarray(dtype=ti.f32, ndim=2),
+             model: ti.types.ndarray(dtype=ti.i32, ndim=1), weight: ti.f32, group: ti.i32):
+        """Slots [offset, offset + n) ← the n rows of ``state`` and ``model``, weight ``weight``, group ``group``."""
+        for p in range(state.shape[0]):
+            for d in ti.static(range(DIM)):
+                self.state[offset + p, d] = state[p, d]
+            self.model[offset + p] = model[p]
+            self.weight[offset + p] = weight
+            self.group[offset + p] = group

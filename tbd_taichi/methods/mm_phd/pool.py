@@ -1,0 +1,142 @@
+"""The host side of MM-PHD's particle pool: it lays the detector and the trackers out as groups of one pool
+(``kernels.phd``, or its NumPy twin) and sequences one frame's launches; it keeps no per-particle state itself."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...engines import kernel_module
+from ...kernels.phd import NO_CENTRE
+from ...motion_models import DIM, model_set
+from .params import P_DETECT, Derived, MMPHDParams
+
+MAX_MODELS = 4
+
+
+def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
+    """(MAX_MODELS + 1, MAX_MODELS) cumulative rows: Π's rows (Eq. 39) then β (Eq. 28), padded with 1."""
+    out = np.ones((MAX_MODELS + 1, MAX_MODELS), np.float32)
+    n = len(birth)
+    out[:n, :n] = np.cumsum(switch, axis=1)
+    out[MAX_MODELS, :n] = np.cumsum(birth)
+    out[:, n - 1:] = 1.0  # the last model takes what rounding leaves
+    return out
+
+
+def padded(matrices: np.ndarray) -> np.ndarray:
+    """(n, 7, 7) model matrices as the (MAX_MODELS, 7, 7) table of the kernels."""
+    out = np.zeros((MAX_MODELS, DIM, DIM), np.float32)
+    out[:len(matrices)] = matrices
+    return out
+
+
+class PhdPool:
+    """One pool of ``capacity`` slots and ``max_groups`` groups on ``engine``; group 0 is the detector when a
+    frame's layout has one.  :meth:`layout` fixes the groups of a frame, the step methods launch."""
+
+    def __init__(self, shape, p: MMPHDParams, d: Derived, capacity: int, max_groups: int, seed: int,
+                 engine: str, arch: str | None):
+        self.k = kernel_module(engine, "phd", arch).PhdKernels(capacity, max_groups, shape)
+        self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
+        self.max_groups = max_groups
+        ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
+        for name in ("F", "F_inv", "L"):
+            self.k.put(name, padded(ms[name]))
+        self.k.put("model_cdf", model_cdf(d.switch, d.birth_models))
+        self.gint = np.zeros((max_groups, 7), np.int32)
+        self.gflt = np.zeros((max_groups, 5), np.float32)
+        self.n_groups = 0
+        self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
+        self.no_centre = np.full((1, 2), -1.0e6, np.float32)
+
+    def set_frame(self, z: np.ndarray, births: bool = True) -> int:
+        """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29); returns their
+        number."""
+        self.k.put("raw", z)
+        if not births:
+            return 0
+        cells = np.flatnonzero(z.ravel() >= self.d.threshold).astype(np.int32)
+        full = np.zeros(z.size, np.int32)
+        full[:cells.size] = cells
+        self.k.put("cells", full)
+        return int(cells.size)
+
+    def layout(self, lengths, births, masked, qscale, centres=None, radii=None) -> int:
+        """Groups of consecutive slots of ``lengths`` (births included; the last ``births[g]`` are newborn),
+        weighing the masked frame where ``masked``, with Q scales ``qscale`` and class centres ``centres`` (x, y
+        rows, the predicted target positions; None: no gate) and gate radii ``radii`` (px per axis; None: 3Σ);
+        returns the slots in use."""
+        n = len(lengths)
+        g = self.gint
+        g[:] = 0
+        g[:n, 1] = lengths
+        g[:n, 0] = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        g[:n, 2], g[:n, 3] = births, masked
+        self.gflt[:] = 0
+        self.gflt[:n, 0] = qscale
+        self.gflt[:n, 2:4] = NO_CENTRE if centres is None else centres
+        self.gflt[:n, 4] = self.d.class_radius if radii is None else radii
+        self.n_groups = n
+        self.k.put("gint", g)
+        self.k.put("gflt", self.gflt)
+        return int(np.sum(lengths))
+
+    def propagate(self, frame_key: int, total: int, n_cells: int, backward: bool = False) -> None:
+        """Eqs. 1, 26, 28–34 over slots [0, total)."""
+        self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), self.birth)
+
+    def weigh(self, first_group: int, n_groups: int, on_likelihood: bool | None = None) -> None:
+        """Eqs. 4, 13–19 for groups [first_group, first_group + n_groups) (their slots are consecutive), with
+        the resampling weights ∝ ℓ (Eq. 24) or ∝ w̃ (``on_likelihood``; None: the likelihood_resampling
+        parameter)."""
+        if n_groups <= 0:
+            return
+        a = int(self.gint[first_group, 0])
+        last = first_group + n_groups - 1
+        count = int(self.gint[last, 0] + self.gint[last, 1]) - a
+        if count > 0:
+            self.k.likelihood(a, count, self.d.half, self.p.psf_sigma)
+        lik = self.p.likelihood_resampling if on_likelihood is None else on_likelihood
+        self.k.update(first_group, n_groups, self.d.lam, int(lik), self.d.threshold, 1.0 - P_DETECT)
+
+    def estimates(self, first_group: int, n_groups: int) -> np.ndarray:
+        """Eqs. 20, 35 for the groups; returns the kernels' ``est`` table (all groups)."""
+        if n_groups > 0:
+            self.k.estimate(first_group, n_groups, self.d.class_radius)
+        return self.k.get("est")
+
+    def mask(self, centres: np.ndarray) -> None:
+        """Eq. 36: the detector's frame with I_0 over the windows around ``centres`` (x, y rows), ⌊3Σ⌋ +
+        mask_margin px each side."""
+        c = np.asarray(centres, np.float32).reshape(-1, 2)
+        self.k.mask(c if len(c) else self.no_centre, self.d.half + self.p.mask_margin, self.p.mask_value)
+
+    def n_hat(self) -> np.ndarray:
+        """n̂ of each group of the layout (Eq. 19)."""
+        return self.k.get("gout")[:self.n_groups, 0].astype(float)
+
+    def resample(self, frame_key: int, out_lengths, out_weights, keep) -> int:
+        """Each group g to ``out_lengths[g]`` particles of weight ``out_weights[g]`` (0 length: the group ends),
+        compacted in group order; the kept groups are renumbered 0, 1, …; returns the slots in use."""
+        n = self.n_groups
+        lens = np.where(keep, out_lengths, 0).astype(np.int32)
+        g = self.gint
+        g[:n, 5] = lens
+        g[:n, 4] = np.concatenate([[0], np.cumsum(lens)[:-1]])
+        g[:n, 6] = np.cumsum(keep) - 1
+        self.gflt[:n, 1] = out_weights
+        self.k.put("gint", g)
+        self.k.put("gflt", self.gflt)
+        self.k.resample(self.seed, frame_key, n, int(max(lens.max(initial=0), 1)))
+        total = int(lens.sum())
+        self.k.commit(total)
+        return total
+
+    def particles(self, start: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state (count, 7), model (count,), w̃ (count,)) of slots [start, start + count), copied to the host."""
+        sl = slice(start, start + count)
+        return self.k.get("state")[sl], self.k.get("model")[sl], self.k.get("wtilde")[sl]
+
+    def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
+        """Slots [offset, offset + n) ← the particles ``state``, ``model`` of weight ``weight`` in ``group``."""
+        self.k.load(offset, np.ascontiguousarray(state, np.float32), np.ascontiguousarray(model, np.int32),
+                    float(weight), int(group))

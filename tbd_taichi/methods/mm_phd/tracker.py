@@ -1,0 +1,272 @@
+"""MM-PHD track-before-detect over a frame stream (Long et al. 2012, Fig. 1): a detector PHD filter with births
+captures targets on the masked frame (Eq. 36), each capture gets a birth-free tracker, a track is confirmed after
+``confirm_frames`` consecutive tracked frames (then the backward recursion extends it back, Eqs. 25–27) and halts
+after ``halt_drops`` consecutive drops.  All filters are groups of one particle pool: each step is one launch.
+
+Per frame k: every filter predicts (births into the detector); the trackers weigh z_k and give their estimates;
+the detector weighs z_k masked with I_0 over the trackers' windows; the trackers' bookkeeping (tracked when
+n̂ ≥ drop_below; Eq. 21's Q scale); every filter is resampled to L_max (trackers' mass capped at one target);
+the detector's particles are split by k-means into round(n̂) classes, and a class of mass ≥ drop_below that is
+6Σ from every tracker becomes a tracker.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...background import DEFAULT_BACKGROUND, Preprocessor
+from ...kernels.phd import NO_CENTRE
+from ...motion_models import VX, VY, X, Y
+from ...tables import TRACK_COLUMNS
+from ..registry import OneSequence
+from .backward import BackwardRecursion
+from .estimation import Capture, adapted_scale, captures, live_dims, log_det, unpack
+from .params import derived, mm_phd_params, pool_capacity
+from .pool import PhdPool
+
+STAGES = ("normalise", "filter", "extraction", "backward")
+
+
+def track_columns(models) -> tuple[str, ...]:
+    """The tracks CSV columns: the common ones, then P_r of Eq. 35 per model (``p_cv``, ``p_c_ct``, …)."""
+    return TRACK_COLUMNS + tuple("p_" + m.replace("-", "_") for m in models)
+
+
+def track_dtype(models) -> np.dtype:
+    return np.dtype([(c, np.int64 if c in ("frame", "track_id") else np.float64) for c in track_columns(models)])
+
+
+@dataclass
+class Target:
+    """One tracker: its id, particles in the pool, Q scale s (Eq. 21), run lengths and rows
+    (frame, track_id, x, y, vx, vy, intensity, n̂, P_r…)."""
+
+    track_id: int
+    capture: Capture
+    first_frame: int
+    count: int
+    scale: float = 1.0
+    log_det: float | None = None
+    streak: int = 1
+    drops: int = 0
+    confirmed: bool = False
+    halted: bool = False
+    rows: list = field(default_factory=list)
+    position: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    velocity_sd: float = 0.0
+    mass: float = 1.0
+
+    def follow(self, mean: np.ndarray, cov: np.ndarray, mass: float, T: float) -> None:
+        """The class estimate of this frame: position, velocity (px/s) and its largest standard deviation; an
+        empty class (mass 0) keeps the predicted position and the velocity."""
+        if mass <= 0:
+            self.position = self.position + self.velocity * T
+            return
+        self.position, self.velocity = mean[[X, Y]], mean[[VX, VY]]
+        self.velocity_sd = float(np.sqrt(max(cov[VX, VX], cov[VY, VY], 0.0)))
+
+
+def tracker_start(c: Capture, count: int, vmax: float, fresh: float, rng: np.random.Generator):
+    """A new tracker's ``count`` particles: the capture's drawn with replacement, a ``fresh`` share of them with
+    the velocity drawn anew from Eq. 29's U[−V_max, V_max] (the detector's likelihood-resampled particles carry
+    few distinct velocities, and a target seen once has not shown its velocity yet)."""
+    pick = rng.integers(0, len(c.state), count)
+    state, model = c.state[pick].copy(), c.model[pick]
+    anew = rng.random(count) < fresh
+    state[np.ix_(anew, [VX, VY])] = rng.uniform(-vmax, vmax, (int(anew.sum()), 2))
+    return state, model
+
+
+class MMPHDTracker(OneSequence):
+    """``update(frame)`` takes one raw frame and returns the rows of confirmed tracks for it; ``finish()``
+    returns every confirmed track's whole path (capture and backward frames included), or with
+    ``history=False`` the rows as output."""
+
+    def __init__(self, shape, seed: int = 0, engine: str = "taichi", arch: str | None = None,
+                 background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, history: bool = True, **params):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.p = mm_phd_params(self.shape, **params)
+        self.d = derived(self.p)
+        self.seed, self.engine, self.arch, self.history = int(seed), engine, arch, history
+        self.pool = PhdPool(self.shape, self.p, self.d, pool_capacity(self.p), self.p.max_tracks + 1, seed, engine,
+                            arch)
+        self.preprocess = Preprocessor(self.shape, background, bad_pixels, engine)
+        self.buffer: deque = deque(maxlen=self.p.backward_frames + 1)
+        self.dims = live_dims(self.d.models)
+        self.columns = track_columns(self.d.models)
+        self.targets: list[Target] = []
+        self.det_count, self.next_id, self.frame = 0, 1, 0
+        self.done_rows: list[tuple] = []
+        self.online_rows: list[tuple] = []
+        self.n_hat_history: list[float] = []
+        self.confirmations: dict[int, int] = {}
+        self.stage_seconds = {s: 0.0 for s in STAGES}
+        self._backward = None
+
+    @property
+    def frames_in(self) -> int:
+        """Raw frames taken so far."""
+        return self.frame
+
+    @property
+    def timings(self) -> dict:
+        """Cumulative wall seconds per stage (STAGES)."""
+        return dict(self.stage_seconds)
+
+    def update(self, frame: np.ndarray) -> list[tuple]:
+        """Process one raw frame; returns the rows of confirmed tracks at this frame."""
+        self._check_open("update")
+        t0 = time.perf_counter()
+        z = self.preprocess(frame, self.frame)
+        k = self.frame
+        self.buffer.append((k, z))
+        t1 = time.perf_counter()
+        n_hat, est = self._filter_step(k, z)
+        t2 = time.perf_counter()
+        released = self._bookkeeping(k, n_hat, est)
+        self._resample_and_capture(k, n_hat)
+        self.n_hat_history.append(float(n_hat[0]))
+        t3 = time.perf_counter()
+        self.stage_seconds["normalise"] += t1 - t0
+        self.stage_seconds["filter"] += t2 - t1
+        self.stage_seconds["extraction"] += t3 - t2 - self._backward_seconds
+        self.frame += 1
+        self.online_rows.extend(released)
+        return released
+
+    def finish(self) -> np.ndarray:
+        """Every confirmed track's rows (whole paths), or the rows as output with ``history=False``."""
+        self._close_sequence()
+        rows = self.online_rows if not self.history else \
+            self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
+        table = np.array([tuple(r) for r in rows], dtype=track_dtype(self.d.models))
+        return np.sort(table, order=["frame", "track_id"])
+
+    # ------------------------------------------------------------------ one frame
+
+    def _filter_step(self, k: int, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Predict all filters (Eqs. 1, 28–34), weigh the trackers on z_k, mask (Eq. 36), weigh the detector."""
+        pool, n_tr = self.pool, len(self.targets)
+        n_cells = pool.set_frame(z)
+        births = self.p.births if n_cells else 0
+        lengths = [self.det_count + births] + [t.count for t in self.targets]
+        T, r0 = self.p.frame_interval, self.d.class_radius
+        centres = np.array([[NO_CENTRE, NO_CENTRE]] + [t.position + t.velocity * T for t in self.targets])
+        radii = [r0] + [r0 + 2.0 * t.velocity_sd * T for t in self.targets]
+        total = pool.layout(lengths, [births] + [0] * n_tr, [1] + [0] * n_tr,
+                            [1.0] + [t.scale for t in self.targets], centres, radii)
+        pool.propagate(k, total, n_cells)
+        pool.weigh(1, n_tr)
+        est = pool.estimates(1, n_tr)
+        pool.mask(est[1:1 + n_tr, [X, Y]])
+        pool.weigh(0, 1, on_likelihood=self.p.detector_resampling == "likelihood")
+        return pool.n_hat(), est
+
+    def _bookkeeping(self, k: int, n_hat: np.ndarray, est: np.ndarray) -> list[tuple]:
+        """Each tracker's frame: tracked (n̂ ≥ drop_below) or dropped, confirmation (then the backward
+        recursion), halting, Eq. 21's Q scale; returns the rows released now."""
+        p, released = self.p, []
+        self._backward_seconds = 0.0
+        if not self.targets:
+            return released
+        stats = [unpack(est[1 + i], len(self.d.models)) for i in range(len(self.targets))]
+        for t, (mean, cov, probs, nh) in zip(self.targets, stats):
+            t.follow(mean, cov, nh, self.p.frame_interval)
+            t.mass = nh
+            if nh >= p.drop_below:
+                t.streak, t.drops = t.streak + 1, 0
+                t.rows.append(self._row(k, t.track_id, mean, probs, nh))
+                if t.confirmed:
+                    released.append(t.rows[-1])
+                elif t.streak >= p.confirm_frames:
+                    self._confirm(t, k)
+                    released.append(t.rows[-1])
+            else:
+                t.streak, t.drops = 0, t.drops + 1
+                t.halted = t.drops >= p.halt_drops
+        self._exclude_duplicates()
+        if p.adaptive_q:
+            now = np.array([log_det(cov, self.dims) for _, cov, _, _ in stats])
+            before = np.array([now[i] if t.log_det is None else t.log_det for i, t in enumerate(self.targets)])
+            scales = adapted_scale(np.array([t.scale for t in self.targets]), now, before, p.q_max_ratio)
+            for t, s, ld in zip(self.targets, scales, now):
+                t.scale, t.log_det = float(s), float(ld)
+        return released
+
+    def _exclude_duplicates(self) -> None:
+        """Targets are ≥ 6Σ apart (Eq. 12): of two live trackers closer than that, the younger halts."""
+        gap = 6.0 * self.p.psf_sigma
+        live = [t for t in self.targets if not t.halted]
+        for i, a in enumerate(live):
+            for b in live[i + 1:]:
+                if not a.halted and not b.halted and np.hypot(*(a.position - b.position)) < gap:
+                    b.halted = True
+
+    def _confirm(self, t: Target, k: int) -> None:
+        """Confirmation at frame k: the backward recursion from the capture frame (Eqs. 25–27) prepends rows."""
+        t.confirmed = True
+        self.confirmations[t.track_id] = k
+        if not self.p.backward:
+            return
+        t0 = time.perf_counter()
+        if self._backward is None:
+            self._backward = BackwardRecursion(self.shape, self.p, self.d, self.seed, self.engine, self.arch)
+        earlier = [(f, z) for f, z in reversed(self.buffer) if f < t.first_frame]
+        back = self._backward.rows(t.capture, earlier, t.track_id)
+        t.rows[:0] = [self._row(f, t.track_id, mean, probs, nh) for f, mean, probs, nh in reversed(back)]
+        spent = time.perf_counter() - t0
+        self._backward_seconds += spent
+        self.stage_seconds["backward"] += spent
+
+    def _resample_and_capture(self, k: int, n_hat: np.ndarray) -> None:
+        """The detector's captures (before resampling), then every filter resampled to L_max (ended trackers
+        dropped; a tracker's mass at most one target), then the captures become trackers."""
+        p, L = self.p, self.p.max_particles
+        det_len = int(self.pool.gint[0, 1])
+        found = self._captures(k, n_hat[0], det_len) if round(n_hat[0]) >= 1 else []
+        out_len = [L if det_len else 0] + [L] * len(self.targets)
+        weights = [n_hat[0] / L] + [1.0 / L] * len(self.targets)  # a tracker holds one target (see docs)
+        keep = [True] + [not t.halted for t in self.targets]
+        offset = self.pool.resample(k, out_len, weights, keep)
+        for t in self.targets:
+            if t.halted and t.confirmed:
+                self.done_rows.extend(t.rows)
+        self.targets = [t for t in self.targets if not t.halted]
+        for t in self.targets:
+            t.count = L
+        self.det_count = L if det_len else 0
+        rng = np.random.default_rng([self.seed, k, 1])
+        for c in found:
+            if len(self.targets) >= p.max_tracks:
+                break
+            t = Target(self.next_id, c, k, L)
+            t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
+            t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
+            t.rows.append(self._row(k, t.track_id, c.mean, c.probs, min(c.mass, 1.0)))
+            state, model = tracker_start(c, L, p.vmax, p.fresh_velocity, rng)
+            self.pool.load(offset, state, model, 1.0 / L, len(self.targets) + 1)
+            offset += L
+            self.targets.append(t)
+            self.next_id += 1
+
+    def _captures(self, k: int, n_hat: float, det_len: int) -> list[Capture]:
+        """k-means on the detector's PHD (:func:`captures`); the classes of mass ≥ drop_below at least 6Σ from
+        every live tracker."""
+        p = self.p
+        state, model, wtilde = self.pool.particles(0, det_len)
+        gap = 6.0 * p.psf_sigma  # Eq. 12
+        rng = np.random.default_rng([self.seed, k])
+        live = [t.position for t in self.targets if not t.halted]
+        return [c for c in captures(state, model, wtilde, n_hat, len(self.d.models), gap, self.d.class_radius,
+                                    p.max_particles, rng)
+                if c.mass >= p.drop_below and all(np.hypot(*(c.mean[[X, Y]] - q)) >= gap for q in live)]
+
+    def _row(self, frame: int, track_id: int, mean: np.ndarray, probs: np.ndarray, n_hat: float) -> tuple:
+        """A tracks row: velocities in px/frame (the state's px/s times T), confidence min(n̂, 1), then P_r."""
+        T = self.p.frame_interval
+        return (int(frame), int(track_id), float(mean[0]), float(mean[2]), float(mean[1] * T), float(mean[3] * T),
+                float(mean[4]), float(min(n_hat, 1.0)), *(float(v) for v in probs))
