@@ -1,8 +1,8 @@
 """Particle PHD track-before-detect kernels (Long et al. 2012, MM-PHD TBD): one particle pool for a detector and
 its trackers, each filter a *group* of consecutive slots; every step is one launch for all groups given.
 
-Slot layout (the scheduler's, ``tbd_taichi.methods.mm_phd``): group g owns slots [start_g, start_g + len_g), the
-last ``births_g`` of them newborn this frame.  A particle is the 7-D state of ``tbd_taichi.motion_models``
+Slot layout (the scheduler's, ``tbd_taichi.methods.mm_phd``): group g owns slots [start_g, start_g + len_g); the
+detector, group 0, comes first and its newborn slots are the last of its segment.  A particle is the 7-D state of ``tbd_taichi.motion_models``
 (x, ẋ, y, ẏ, I, ẍ, ÿ; px, px/s, px/s²), a model index r and a PHD weight w.
 
 Steps (Eq. numbers of the paper):
@@ -38,9 +38,9 @@ S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals a
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
 S_RESAMPLE = 15
 SQRT_HALF = 0.7071067811865476
-GROUP_INT = ("start", "length", "births", "frame", "out_start", "out_len", "out_id")
+GROUP_INT = ("start", "length", "frame", "out_start", "out_len", "out_id")
 GROUP_FLOAT = ("qscale", "out_weight", "cx", "cy", "radius")
-START, LENGTH, BIRTHS, FRAME, OUT_START, OUT_LEN, OUT_ID = range(len(GROUP_INT))
+START, LENGTH, FRAME, OUT_START, OUT_LEN, OUT_ID = range(len(GROUP_INT))
 QSCALE, OUT_WEIGHT, CX, CY, RADIUS = range(len(GROUP_FLOAT))
 NO_CENTRE = -1.0e6  # cx of a group whose class is centred on its peak cell
 N_HAT, TOTAL = 0, 1  # columns of gout: n̂, resampling total
@@ -85,8 +85,8 @@ class PhdKernels:
         self.loglik, self.wtilde, self.cdf = ti.field(ti.f32, c), ti.field(ti.f32, c), ti.field(ti.f32, c)
         self.cellmass = ti.field(ti.f32, c)
         self.cell = ti.field(ti.i32, c)
-        # group tables (columns GROUP_INT, GROUP_FLOAT): input segment, births, frame (0 raw, 1 masked), output
-        # segment and new id; Q scale s_g and output weight; results n̂_g, total_g; estimates (ESTIMATE columns)
+        # group tables (columns GROUP_INT, GROUP_FLOAT): input segment, frame (0 raw, 1 masked), output segment
+        # and new id; Q scale s_g, output weight, gate centre and radius; results n̂_g, total_g; estimates (EST_*)
         self.gint, self.gflt = ti.field(ti.i32, (g, len(GROUP_INT))), ti.field(ti.f32, (g, len(GROUP_FLOAT)))
         self.gout = ti.field(ti.f32, (g, 2))
         self.est = ti.field(ti.f32, (g, EST_WIDTH))
@@ -103,17 +103,18 @@ class PhdKernels:
 
     @ti.kernel
     def propagate(self, seed: ti.u32, frame_key: ti.u32, total: ti.i32, backward: ti.i32, n_cells: ti.i32,
-                  birth: ti.types.vector(6, ti.f32)):
+                  first_birth: ti.i32, n_births: ti.i32, birth: ti.types.vector(6, ti.f32)):
         """Slots [0, total): survivors switch model and move (``backward`` ≠ 0: by F⁻¹, Eq. 26), w ← e·w; the
-        newborn slots draw Eqs. 28–30's births over ``cells[0:n_cells]``.  ``birth`` = (e, V_max, I_min, I_max,
+        newborn slots [first_birth, first_birth + n_births) join group 0 (the detector) and draw Eqs. 28–30's
+        births over ``cells[0:n_cells]``.  ``birth`` = (e, V_max, I_min, I_max,
         γ/J, I_floor); V_max in px/s; a survivor's intensity is kept ≥ I_floor."""
         survive, vmax, i_min, i_max, w_birth, i_floor = birth[0], birth[1], birth[2], birth[3], birth[4], birth[5]
         k_switch = key_prefix(seed, frame_key, S_SWITCH)
         keys = [key_prefix(seed, frame_key, S_NOISE + d) for d in ti.static(range(DIM))]
         kb = [key_prefix(seed, frame_key, s) for s in ti.static(range(S_CELL, S_MODEL + 1))]
         for p in range(total):
-            g = self.group[p]
-            if p >= self.gint[g, START] + self.gint[g, LENGTH] - self.gint[g, BIRTHS]:
+            if first_birth <= p < first_birth + n_births:
+                self.group[p] = 0
                 c = self.cells[ti.min(ti.cast(uniform_at(kb[0], p) * n_cells, ti.i32), n_cells - 1)]
                 self.state[p, 0] = ti.cast(c % self.shape[1], ti.f32) - 0.5 + uniform_at(kb[1], p)
                 self.state[p, 2] = ti.cast(c // self.shape[1], ti.f32) - 0.5 + uniform_at(kb[2], p)
@@ -125,6 +126,7 @@ class PhdKernels:
                 self.model[p] = self.draw(BETA_ROW, uniform_at(kb[6], p))
                 self.weight[p] = w_birth
             else:
+                g = self.group[p]
                 r = self.draw(self.model[p], uniform_at(k_switch, p))
                 self.model[p] = r
                 n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, keys[d], p)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.phd import (BETA_ROW, BIRTHS, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
+from ..kernels.phd import (BETA_ROW, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOTAL)
@@ -62,13 +62,14 @@ class PhdKernels:
         """The first model j with model_cdf[row, j] > u, per particle."""
         return np.minimum((u[:, None] >= self.model_cdf[rows]).sum(axis=1), MAX_MODELS - 1).astype(np.int32)
 
-    def propagate(self, seed: int, frame_key: int, total: int, backward: int, n_cells: int, birth) -> None:
+    def propagate(self, seed: int, frame_key: int, total: int, backward: int, n_cells: int, first_birth: int,
+                  n_births: int, birth) -> None:
         """Survivors switch and move (Eqs. 1, 26, 31–34), births drawn (Eqs. 28–30); see the kernel."""
         survive, vmax, i_min, i_max, w_birth, i_floor = (F32(v) for v in birth)
         p = np.arange(total)
-        g = self.group[:total]
-        born = p >= self.gint[g, START] + self.gint[g, LENGTH] - self.gint[g, BIRTHS]
+        born = (p >= first_birth) & (p < first_birth + n_births)
         b, s = p[born], p[~born]
+        self.group[b] = 0
         if b.size:
             u = {st: uniform(seed, frame_key, st, b) for st in (S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL)}
             c = self.cells[np.minimum((u[S_CELL] * F32(n_cells)).astype(np.int32), n_cells - 1)]

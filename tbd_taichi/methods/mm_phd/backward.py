@@ -37,7 +37,7 @@ class BackwardRecursion:
             key = BACKWARD_KEY + (track_id % (1 << 18)) * 4096 + step % 4096
             pool.set_frame(z, births=False)
             sd = np.sqrt(max(cov[VX, VX], cov[VY, VY], 0.0))
-            pool.layout([n], [0], [0], [1.0], [mean[[X, Y]] - mean[[VX, VY]] * T], [r0 + 2.0 * sd * T])
+            pool.layout([n], [0], [1.0], [mean[[X, Y]] - mean[[VX, VY]] * T], [r0 + p.gate_sigmas * sd * T])
             pool.propagate(key, n, 0, backward=True)  # Eqs. 26–27
             pool.weigh(0, 1)
             mean, cov, probs, n_hat = unpack(pool.estimates(0, 1)[0], len(self.d.models))

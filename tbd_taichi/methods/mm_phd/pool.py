@@ -5,11 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...engines import kernel_module
-from ...kernels.phd import NO_CENTRE
+from ...kernels.phd import (CX, CY, FRAME, GROUP_FLOAT, GROUP_INT, LENGTH, NO_CENTRE, OUT_ID, OUT_LEN,
+                             N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START)
 from ...motion_models import DIM, model_set
 from .params import P_DETECT, Derived, MMPHDParams
 
 MAX_MODELS = 4
+EVERY_CELL = 1.0e30  # −threshold that makes every cell a measurement
 
 
 def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
@@ -42,61 +44,66 @@ class PhdPool:
         for name in ("F", "F_inv", "L"):
             self.k.put(name, padded(ms[name]))
         self.k.put("model_cdf", model_cdf(d.switch, d.birth_models))
-        self.gint = np.zeros((max_groups, 7), np.int32)
-        self.gflt = np.zeros((max_groups, 5), np.float32)
+        self.gint = np.zeros((max_groups, len(GROUP_INT)), np.int32)
+        self.gflt = np.zeros((max_groups, len(GROUP_FLOAT)), np.float32)
         self.n_groups = 0
         self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
         self.no_centre = np.full((1, 2), -1.0e6, np.float32)
 
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
-        """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29); returns their
-        number."""
+        """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,
+        with newborn weight 0 this frame); returns their number."""
         self.k.put("raw", z)
         if not births:
             return 0
         cells = np.flatnonzero(z.ravel() >= self.d.threshold).astype(np.int32)
-        full = np.zeros(z.size, np.int32)
+        self.birth[4] = self.p.birth_mass / self.p.births if cells.size else 0.0
+        full = np.arange(z.size, dtype=np.int32)
         full[:cells.size] = cells
         self.k.put("cells", full)
-        return int(cells.size)
+        return int(cells.size) or z.size
 
-    def layout(self, lengths, births, masked, qscale, centres=None, radii=None) -> int:
-        """Groups of consecutive slots of ``lengths`` (births included; the last ``births[g]`` are newborn),
-        weighing the masked frame where ``masked``, with Q scales ``qscale`` and class centres ``centres`` (x, y
-        rows, the predicted target positions; None: no gate) and gate radii ``radii`` (px per axis; None: 3Σ);
-        returns the slots in use."""
+    def layout(self, lengths, masked, qscale, centres=None, radii=None) -> int:
+        """Groups of consecutive slots of ``lengths`` (the detector's newborn slots included), weighing the
+        masked frame where ``masked``, with Q scales ``qscale``, gate centres ``centres`` (x, y rows, the
+        predicted target positions; None: no gate) and gate radii ``radii`` (px per axis; None: 3Σ); returns
+        the slots in use."""
         n = len(lengths)
         g = self.gint
         g[:] = 0
-        g[:n, 1] = lengths
-        g[:n, 0] = np.concatenate([[0], np.cumsum(lengths)[:-1]])
-        g[:n, 2], g[:n, 3] = births, masked
+        g[:n, LENGTH] = lengths
+        g[:n, START] = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        g[:n, FRAME] = masked
         self.gflt[:] = 0
-        self.gflt[:n, 0] = qscale
-        self.gflt[:n, 2:4] = NO_CENTRE if centres is None else centres
-        self.gflt[:n, 4] = self.d.class_radius if radii is None else radii
+        self.gflt[:n, QSCALE] = qscale
+        self.gflt[:n, CX:CY + 1] = NO_CENTRE if centres is None else centres
+        self.gflt[:n, RADIUS] = self.d.class_radius if radii is None else radii
         self.n_groups = n
         self.k.put("gint", g)
         self.k.put("gflt", self.gflt)
         return int(np.sum(lengths))
 
-    def propagate(self, frame_key: int, total: int, n_cells: int, backward: bool = False) -> None:
-        """Eqs. 1, 26, 28–34 over slots [0, total)."""
-        self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), self.birth)
+    def propagate(self, frame_key: int, total: int, n_cells: int, births: int = 0, backward: bool = False) -> None:
+        """Eqs. 1, 26, 28–34 over slots [0, total); the detector's last ``births`` slots are newborn."""
+        first = int(self.gint[0, START] + self.gint[0, LENGTH]) - births
+        self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), first, births, self.birth)
 
-    def weigh(self, first_group: int, n_groups: int, on_likelihood: bool | None = None) -> None:
+    def weigh(self, first_group: int, n_groups: int, on_likelihood: bool | None = None,
+              segmented: bool = False) -> None:
         """Eqs. 4, 13–19 for groups [first_group, first_group + n_groups) (their slots are consecutive), with
         the resampling weights ∝ ℓ (Eq. 24) or ∝ w̃ (``on_likelihood``; None: the likelihood_resampling
-        parameter)."""
+        parameter); ``segmented``: only cells with z ≥ Th are measurements (§5.1's pre-segmentation, a particle
+        elsewhere keeps (1 − p_d)·w), else every cell is."""
         if n_groups <= 0:
             return
-        a = int(self.gint[first_group, 0])
+        a = int(self.gint[first_group, START])
         last = first_group + n_groups - 1
-        count = int(self.gint[last, 0] + self.gint[last, 1]) - a
+        count = int(self.gint[last, START] + self.gint[last, LENGTH]) - a
         if count > 0:
             self.k.likelihood(a, count, self.d.half, self.p.psf_sigma)
         lik = self.p.likelihood_resampling if on_likelihood is None else on_likelihood
-        self.k.update(first_group, n_groups, self.d.lam, int(lik), self.d.threshold, 1.0 - P_DETECT)
+        th = self.d.threshold if segmented else -EVERY_CELL
+        self.k.update(first_group, n_groups, self.d.lam, int(lik), th, 1.0 - P_DETECT)
 
     def estimates(self, first_group: int, n_groups: int) -> np.ndarray:
         """Eqs. 20, 35 for the groups; returns the kernels' ``est`` table (all groups)."""
@@ -112,22 +119,23 @@ class PhdPool:
 
     def n_hat(self) -> np.ndarray:
         """n̂ of each group of the layout (Eq. 19)."""
-        return self.k.get("gout")[:self.n_groups, 0].astype(float)
+        return self.k.get("gout")[:self.n_groups, N_HAT].astype(float)
 
-    def resample(self, frame_key: int, out_lengths, out_weights, keep) -> int:
+    def resample(self, frame_key: int, out_lengths, out_weights, keep, room: int = 0) -> int:
         """Each group g to ``out_lengths[g]`` particles of weight ``out_weights[g]`` (0 length: the group ends),
-        compacted in group order; the kept groups are renumbered 0, 1, …; returns the slots in use."""
+        compacted in group order with ``room`` free slots after group 0 (the next frame's newborns); the kept
+        groups are renumbered 0, 1, …; returns the slots in use (room included)."""
         n = self.n_groups
         lens = np.where(keep, out_lengths, 0).astype(np.int32)
         g = self.gint
-        g[:n, 5] = lens
-        g[:n, 4] = np.concatenate([[0], np.cumsum(lens)[:-1]])
-        g[:n, 6] = np.cumsum(keep) - 1
-        self.gflt[:n, 1] = out_weights
+        g[:n, OUT_LEN] = lens
+        g[:n, OUT_START] = np.concatenate([[0], np.cumsum(lens)[:-1]]) + np.where(np.arange(n) > 0, room, 0)
+        g[:n, OUT_ID] = np.cumsum(keep) - 1
+        self.gflt[:n, OUT_WEIGHT] = out_weights
         self.k.put("gint", g)
         self.k.put("gflt", self.gflt)
         self.k.resample(self.seed, frame_key, n, int(max(lens.max(initial=0), 1)))
-        total = int(lens.sum())
+        total = int(lens.sum()) + (room if n > 0 else 0)
         self.k.commit(total)
         return total
 

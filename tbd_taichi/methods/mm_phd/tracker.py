@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...background import DEFAULT_BACKGROUND, Preprocessor
-from ...kernels.phd import NO_CENTRE
+from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
 from ...tables import TRACK_COLUMNS
 from ..registry import OneSequence
@@ -152,18 +152,17 @@ class MMPHDTracker(OneSequence):
         """Predict all filters (Eqs. 1, 28–34), weigh the trackers on z_k, mask (Eq. 36), weigh the detector."""
         pool, n_tr = self.pool, len(self.targets)
         n_cells = pool.set_frame(z)
-        births = self.p.births if n_cells else 0
+        births = self.p.births
         lengths = [self.det_count + births] + [t.count for t in self.targets]
         T, r0 = self.p.frame_interval, self.d.class_radius
         centres = np.array([[NO_CENTRE, NO_CENTRE]] + [t.position + t.velocity * T for t in self.targets])
-        radii = [r0] + [r0 + 2.0 * t.velocity_sd * T for t in self.targets]
-        total = pool.layout(lengths, [births] + [0] * n_tr, [1] + [0] * n_tr,
-                            [1.0] + [t.scale for t in self.targets], centres, radii)
-        pool.propagate(k, total, n_cells)
+        radii = [r0] + [r0 + self.p.gate_sigmas * t.velocity_sd * T for t in self.targets]
+        total = pool.layout(lengths, [1] + [0] * n_tr, [1.0] + [t.scale for t in self.targets], centres, radii)
+        pool.propagate(k, total, n_cells, births)
         pool.weigh(1, n_tr)
         est = pool.estimates(1, n_tr)
         pool.mask(est[1:1 + n_tr, [X, Y]])
-        pool.weigh(0, 1, on_likelihood=self.p.detector_resampling == "likelihood")
+        pool.weigh(0, 1, on_likelihood=self.p.detector_resampling == "likelihood", segmented=True)
         return pool.n_hat(), est
 
     def _bookkeeping(self, k: int, n_hat: np.ndarray, est: np.ndarray) -> list[tuple]:
@@ -226,19 +225,19 @@ class MMPHDTracker(OneSequence):
         """The detector's captures (before resampling), then every filter resampled to L_max (ended trackers
         dropped; a tracker's mass at most one target), then the captures become trackers."""
         p, L = self.p, self.p.max_particles
-        det_len = int(self.pool.gint[0, 1])
+        det_len = int(self.pool.gint[0, LENGTH])
         found = self._captures(k, n_hat[0], det_len) if round(n_hat[0]) >= 1 else []
-        out_len = [L if det_len else 0] + [L] * len(self.targets)
+        out_len = [L] + [L] * len(self.targets)
         weights = [n_hat[0] / L] + [1.0 / L] * len(self.targets)  # a tracker holds one target (see docs)
         keep = [True] + [not t.halted for t in self.targets]
-        offset = self.pool.resample(k, out_len, weights, keep)
+        offset = self.pool.resample(k, out_len, weights, keep, room=p.births)
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(t.rows)
         self.targets = [t for t in self.targets if not t.halted]
         for t in self.targets:
             t.count = L
-        self.det_count = L if det_len else 0
+        self.det_count = L
         rng = np.random.default_rng([self.seed, k, 1])
         for c in found:
             if len(self.targets) >= p.max_tracks:
