@@ -46,7 +46,8 @@ NO_CENTRE = -1.0e6  # cx of a group whose class is centred on its peak cell
 N_HAT, TOTAL = 0, 1  # columns of gout: n̂, resampling total
 EST_MEAN, EST_COV, EST_PROB = 0, DIM, DIM + DIM * DIM  # columns of est: mean (7), covariance (7×7), P_r (4)
 EST_MASS = EST_PROB + MAX_MODELS  # the PHD mass Σw̃ of the class (Eq. 19 over the class)
-EST_WIDTH = EST_MASS + 1
+EST_PEAK = EST_MASS + 1  # the PHD mass Ψ/(λ + Ψ) of the class's peak cell
+EST_WIDTH = EST_PEAK + 1
 _NP = {ti.f32: np.float32, ti.i32: np.int32}
 
 
@@ -299,6 +300,7 @@ class PhdKernels:
                 for r in ti.static(range(MAX_MODELS)):
                     self.est[g, EST_PROB + r] = probs[r]
                 self.est[g, EST_MASS] = sw
+                self.est[g, EST_PEAK] = ti.max(best, 0.0)
 
     @ti.func
     def near(self, p: ti.i32, cx: ti.f32, cy: ti.f32, radius: ti.f32):

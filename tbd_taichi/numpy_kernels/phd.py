@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.phd import (BETA_ROW, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
+from ..kernels.phd import (BETA_ROW, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOTAL)
@@ -146,8 +146,9 @@ class PhdKernels:
             x, y = self.state[a:b, 0], self.state[a:b, 2]
             gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]
             inside = (self.cell[a:b] >= 0) & ((gx <= NO_CENTRE) | ((np.abs(x - gx) <= gate) & (np.abs(y - gy) <= gate)))
-            members = np.zeros(b - a, bool)
+            members, best = np.zeros(b - a, bool), 0.0
             if inside.any():
+                best = self.cellmass[a:b][inside].max()
                 peak = self.cell[a:b][np.flatnonzero(inside)[np.argmax(self.cellmass[a:b][inside])]]
                 members = (np.abs(x - F32(peak % w)) <= F32(radius)) & (np.abs(y - F32(peak // w)) <= F32(radius))
             wt = np.where(members, self.wtilde[a:b], 0).astype(np.float64)
@@ -164,6 +165,7 @@ class PhdKernels:
             self.est[g, EST_PROB:EST_PROB + MAX_MODELS] = np.bincount(self.model[a:b], weights=wt,
                                                                       minlength=MAX_MODELS)[:MAX_MODELS]
             self.est[g, EST_MASS] = mass
+            self.est[g, EST_PEAK] = best
 
     def resample(self, seed: int, frame_key: int, n_groups: int, max_out: int) -> None:
         """Systematic resampling into the second buffer (Eqs. 20, 24); see the kernel."""

@@ -22,9 +22,9 @@ class BackwardRecursion:
         self.dims = live_dims(d.models)
 
     def rows(self, capture: Capture, frames: list[tuple[int, np.ndarray]], track_id: int) -> list[tuple]:
-        """(frame, mean, model probabilities, n̂) for each frame the target is tracked going back through
-        ``frames`` = [(frame index, z), …] (newest first, the capture's frame excluded), until ``halt_drops``
-        consecutive drops (n̂ < drop_below)."""
+        """(frame, mean, model probabilities, peak-cell mass) for each frame the target is tracked going back
+        through ``frames`` = [(frame index, z), …] (newest first, the capture's frame excluded), until
+        ``halt_drops`` consecutive drops (peak-cell mass < drop_below)."""
         p, pool = self.p, self.pool
         keep = gated(capture, self.dims, p.gate_probability)  # Eq. 25
         state, model = capture.state[keep], capture.model[keep]
@@ -40,13 +40,16 @@ class BackwardRecursion:
             pool.layout([n], [0], [1.0], [mean[[X, Y]] - mean[[VX, VY]] * T], [r0 + p.gate_sigmas * sd * T])
             pool.propagate(key, n, 0, backward=True)  # Eqs. 26–27
             pool.weigh(0, 1)
-            mean, cov, probs, n_hat = unpack(pool.estimates(0, 1)[0], len(self.d.models))
-            if n_hat >= p.drop_below:
+            e = unpack(pool.estimates(0, 1)[0], len(self.d.models))
+            if e.peak >= p.drop_below:
                 drops = 0
-                out.append((frame, mean, probs, n_hat))
+                mean, cov = e.mean, e.cov
+                out.append((frame, e.mean, e.probs, e.peak))
             else:
                 drops += 1
                 if drops >= p.halt_drops:
                     break
+                mean = mean.copy()
+                mean[[X, Y]] -= mean[[VX, VY]] * T  # the gate moves on by the prediction
             n = pool.resample(key, [p.max_particles], [1.0 / p.max_particles], [True])
         return out

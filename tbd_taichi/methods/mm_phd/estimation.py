@@ -9,7 +9,7 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 from scipy.stats import chi2
 
-from ...kernels.phd import EST_COV, EST_MASS, EST_MEAN, EST_PROB
+from ...kernels.phd import EST_COV, EST_MASS, EST_MEAN, EST_PEAK, EST_PROB
 from ...motion_models import DIM, X, Y
 
 DET_FLOOR = 1e-12  # floor of |P̂| in Eq. 21's ratio (the print's ‖·‖ is the determinant)
@@ -28,12 +28,24 @@ class Capture:
     mass: float
 
 
-def unpack(est_row: np.ndarray, n_models: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(mean (7,), covariance (7, 7), model probabilities (n_models,), PHD mass) of one row of the kernels'
-    ``est``: a filter's target class."""
-    mean = est_row[EST_MEAN:EST_MEAN + DIM].astype(float)
-    cov = est_row[EST_COV:EST_COV + DIM * DIM].astype(float).reshape(DIM, DIM)
-    return mean, cov, est_row[EST_PROB:EST_PROB + n_models].astype(float), float(est_row[EST_MASS])
+@dataclass
+class ClassEstimate:
+    """A filter's target class (one row of the kernels' ``est``): mean (7,), covariance (7, 7), model
+    probabilities (Eq. 35), PHD mass Σw̃ and the PHD mass Ψ/(λ + Ψ) of its peak cell."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    probs: np.ndarray
+    mass: float
+    peak: float
+
+
+def unpack(est_row: np.ndarray, n_models: int) -> ClassEstimate:
+    """The :class:`ClassEstimate` of one row of the kernels' ``est``."""
+    return ClassEstimate(est_row[EST_MEAN:EST_MEAN + DIM].astype(float),
+                         est_row[EST_COV:EST_COV + DIM * DIM].astype(float).reshape(DIM, DIM),
+                         est_row[EST_PROB:EST_PROB + n_models].astype(float), float(est_row[EST_MASS]),
+                         float(est_row[EST_PEAK]))
 
 
 def live_dims(models) -> list[int]:

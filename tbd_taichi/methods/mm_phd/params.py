@@ -69,7 +69,7 @@ class MMPHDParams:
                              high=10)
     fresh_velocity: float = param(0.5, doc="share of a new tracker's particles whose velocity is drawn anew "
                                   "from U[−V_max, V_max]", source="not in the paper", low=0, high=1)
-    gate_sigmas: float = param(2.0, doc="a tracker looks for its target within 3Σ + this many velocity standard "
+    gate_sigmas: float = param(4.0, doc="a tracker looks for its target within 3Σ + this many velocity standard "
                                "deviations × T of its predicted position", source="not in the paper", low=0,
                                high=100)
     confirm_frames: int = param(3, doc="consecutive tracked frames that confirm a track", source="§4.2", low=1,

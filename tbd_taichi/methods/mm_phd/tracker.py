@@ -173,12 +173,12 @@ class MMPHDTracker(OneSequence):
         if not self.targets:
             return released
         stats = [unpack(est[1 + i], len(self.d.models)) for i in range(len(self.targets))]
-        for t, (mean, cov, probs, nh) in zip(self.targets, stats):
-            t.follow(mean, cov, nh, self.p.frame_interval)
-            t.mass = nh
-            if nh >= p.drop_below:
+        for t, e in zip(self.targets, stats):
+            t.follow(e.mean, e.cov, e.mass, self.p.frame_interval)
+            t.mass = e.peak
+            if e.peak >= p.drop_below:
                 t.streak, t.drops = t.streak + 1, 0
-                t.rows.append(self._row(k, t.track_id, mean, probs, nh))
+                t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
                 if t.confirmed:
                     released.append(t.rows[-1])
                 elif t.streak >= p.confirm_frames:
@@ -189,7 +189,7 @@ class MMPHDTracker(OneSequence):
                 t.halted = t.drops >= p.halt_drops
         self._exclude_duplicates()
         if p.adaptive_q:
-            now = np.array([log_det(cov, self.dims) for _, cov, _, _ in stats])
+            now = np.array([log_det(e.cov, self.dims) for e in stats])
             before = np.array([now[i] if t.log_det is None else t.log_det for i, t in enumerate(self.targets)])
             scales = adapted_scale(np.array([t.scale for t in self.targets]), now, before, p.q_max_ratio)
             for t, s, ld in zip(self.targets, scales, now):
