@@ -12,6 +12,7 @@ from .params import P_DETECT, Derived, MMPHDParams
 
 MAX_MODELS = 4
 EVERY_CELL = 1.0e30  # −threshold that makes every cell a measurement
+_SPARE: dict[tuple, list] = {}  # finished pools' kernels by (engine, capacity, groups, shape), for reuse
 
 
 def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
@@ -37,7 +38,10 @@ class PhdPool:
 
     def __init__(self, shape, p: MMPHDParams, d: Derived, capacity: int, max_groups: int, seed: int,
                  engine: str, arch: str | None):
-        self.k = kernel_module(engine, "phd", arch).PhdKernels(capacity, max_groups, shape)
+        self.key = (engine, int(capacity), int(max_groups), tuple(int(v) for v in shape))
+        spare = _SPARE.get(self.key)
+        self.k = spare.pop() if spare else \
+            kernel_module(engine, "phd", arch).PhdKernels(capacity, max_groups, shape)
         self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
@@ -49,6 +53,13 @@ class PhdPool:
         self.n_groups = 0
         self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
         self.no_centre = np.full((1, 2), -1.0e6, np.float32)
+
+    def release(self) -> None:
+        """Hand the kernels' fields back for the next pool of the same size (Taichi compiles a data-oriented
+        object's kernels once per object, so a new tracker reuses a finished one's); the pool is spent."""
+        if self.k is not None:
+            _SPARE.setdefault(self.key, []).append(self.k)
+            self.k = None
 
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,

@@ -141,6 +141,9 @@ class MMPHDTracker(OneSequence):
     def finish(self) -> np.ndarray:
         """Every confirmed track's rows (whole paths), or the rows as output with ``history=False``."""
         self._close_sequence()
+        self.pool.release()
+        if self._backward is not None:
+            self._backward.pool.release()
         rows = self.online_rows if not self.history else \
             self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
         table = np.array([tuple(r) for r in rows], dtype=track_dtype(self.d.models))
