@@ -171,6 +171,12 @@ class TrackPlan:
     def streamed(self) -> bool:
         return self.settings.get("history") is False
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The tracks CSV's columns (the method's own after the common ones)."""
+        params, _ = methods.checked_settings(self.spec, self.source.shape, self.settings)
+        return self.spec.track_columns(params)
+
 
 def plan_track(args) -> TrackPlan | None:
     """Check every argument, path and file of ``track`` before a frame is read or a kernel compiled (the input's
@@ -279,7 +285,7 @@ def cmd_track(args) -> int:
         print(text, file=sys.stderr if (err or args.json) else sys.stdout, flush=True)
 
     say(describe(plan.profile, plan.why, profile_settings(plan.spec, plan.profile), plan.given))
-    with tables.CsvTableWriter(plan.out, tables.TRACK_COLUMNS) as writer:
+    with tables.CsvTableWriter(plan.out, plan.columns) as writer:
         final, frames, busy, max_projection = run_tracker(plan, args, writer, say)
     tracks = tables.read_tracks(plan.out) if plan.streamed else final  # streamed rows live only in the file
     n_tracks = len(np.unique(tracks["track_id"]))

@@ -228,6 +228,7 @@ class MethodSpec:
     assumes: str = ""
     rank: int = 100  # listing order (tables, --help): the flagship first
     particle_count: Callable | None = None  # (shape, params) -> particles the tracker is configured with
+    extra_columns: Callable | None = None  # params -> columns its tracks rows carry after TRACK_COLUMNS
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -235,6 +236,12 @@ class MethodSpec:
 
     def param_infos(self) -> list[ParamInfo]:
         return param_infos(self.params)
+
+    def track_columns(self, params) -> tuple[str, ...]:
+        """The tracks CSV columns of a tracker of ``params``: TRACK_COLUMNS and the method's own after them."""
+        from ..tables import TRACK_COLUMNS
+
+        return TRACK_COLUMNS + (tuple(self.extra_columns(params)) if self.extra_columns else ())
 
     def particles(self, shape, params) -> int:
         """The particles a tracker of ``params`` for frames of ``shape`` is configured with (0 if it does not say)."""

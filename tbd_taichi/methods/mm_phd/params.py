@@ -29,10 +29,12 @@ class MMPHDParams:
                                   low_closed=False, high=3600)
     models: str = param("cv,c-ct,ac-ct", doc="motion models (of cv, c-ct, ac-ct, ca), comma separated",
                         symbol="r", source="Eq. 1, §5.2")
-    switch: str = param(PAPER_SWITCH, doc="model transition matrix Π, rows ';'-separated, each summing to 1",
-                        symbol="Π", source="Eq. 39")
-    birth_models: str = param(PAPER_BIRTH_MODELS, doc="model probabilities of newborn particles, summing to 1",
-                              symbol="β", source="§5.2, Eqs. 28, 31")
+    switch: str | None = param(None, doc="model transition matrix Π, rows ';'-separated, each summing to 1 "
+                               "(auto: Eq. 39 for three models, the first in CV's place; 0.8 on the diagonal "
+                               "otherwise)", symbol="Π", source="Eq. 39", optional=True)
+    birth_models: str | None = param(None, doc="model probabilities of newborn particles, summing to 1 (auto: "
+                                     "0.8 for the first model, the rest shared)", symbol="β",
+                                     source="§5.2, Eqs. 28, 31", optional=True)
     omega: float = param(math.pi / 10, doc="turn rate of the coordinated-turn models (not in the paper: a half "
                          "turn in 10 s)", symbol="ω", unit="rad/s", source="not in the paper", low=-math.pi,
                          high=math.pi)
@@ -75,7 +77,8 @@ class MMPHDParams:
     confirm_frames: int = param(3, doc="consecutive tracked frames that confirm a track", source="§4.2", low=1,
                                 high=100)
     halt_drops: int = param(2, doc="consecutive dropped frames that halt a tracker", source="§4.2", low=1, high=100)
-    drop_below: float = param(0.5, doc="a tracker with n̂ below this drops the frame", symbol="n̂",
+    drop_below: float = param(0.5, doc="a tracker drops the frame when its class's peak cell holds PHD mass "
+                              "Ψ/(λ + Ψ) below this; a detector class below it is no capture", symbol="n̂",
                               source="not in the paper", low=0, high=1, low_closed=False, high_closed=False)
     max_tracks: int = param(16, doc="trackers alive at once (pool size; a capture beyond it waits)",
                             source="not in the paper", low=1, high=1024)
@@ -123,6 +126,21 @@ def parse_matrix(text: str, name: str, n: int, rows: int) -> np.ndarray:
     return out
 
 
+def default_switch(n: int) -> str:
+    """Π for ``n`` models: Eq. 39 for three; otherwise 0.8 to stay and the rest shared (1 for one model)."""
+    if n == 3:
+        return PAPER_SWITCH
+    if n == 1:
+        return "1"
+    off = 0.2 / (n - 1)
+    return "; ".join(",".join(f"{0.8 if i == j else off:.12g}" for j in range(n)) for i in range(n))
+
+
+def default_birth_models(n: int) -> str:
+    """β for ``n`` models: §5.2's (0.8, 0.1, 0.1) pattern, 0.8 for the first and the rest shared (1 for one)."""
+    return "1" if n == 1 else ",".join(f"{0.8 if j == 0 else 0.2 / (n - 1):.12g}" for j in range(n))
+
+
 def intensity_for_db(snr_db: float, psf_sigma: float, noise_sigma: float = 1.0) -> float:
     """Eq. 37: I = 2π·σ_n·Σ²·10^(SNR/20), the total intensity of a target of peak SNR ``snr_db`` (Eq. 5)."""
     return 2.0 * math.pi * noise_sigma * psf_sigma ** 2 * 10.0 ** (snr_db / 20.0)
@@ -133,8 +151,8 @@ def derived(p: MMPHDParams) -> Derived:
     1.2·I(SNR + 3 dB)] unless given; Π, β parsed; the window half-width ⌊3Σ⌋ (Eq. 18)."""
     models = check_models(p.models)
     n = len(models)
-    switch = parse_matrix(p.switch, "switch (Π)", n, n)
-    birth = parse_matrix(p.birth_models, "birth_models (β)", n, 1)[0]
+    switch = parse_matrix(p.switch or default_switch(n), "switch (Π)", n, n)
+    birth = parse_matrix(p.birth_models or default_birth_models(n), "birth_models (β)", n, 1)[0]
     th = p.threshold if p.threshold is not None else 10 ** (p.snr_db / 20.0) - norm.ppf(P_DETECT)
     i_min = p.i_min if p.i_min is not None else 0.8 * intensity_for_db(p.snr_db, p.psf_sigma)
     i_max = p.i_max if p.i_max is not None else 1.2 * intensity_for_db(p.snr_db + 3.0, p.psf_sigma)

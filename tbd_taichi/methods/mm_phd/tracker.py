@@ -82,9 +82,9 @@ def tracker_start(c: Capture, count: int, vmax: float, fresh: float, rng: np.ran
 
 
 class MMPHDTracker(OneSequence):
-    """``update(frame)`` takes one raw frame and returns the rows of confirmed tracks for it; ``finish()``
-    returns every confirmed track's whole path (capture and backward frames included), or with
-    ``history=False`` the rows as output."""
+    """``update(frame)`` takes one raw frame and returns the rows of confirmed tracks for it (from confirmation
+    on); ``finish()`` returns every confirmed track's whole path (capture and backward frames included), or with
+    ``history=False`` nothing more (the rows were all output by ``update``; ``online()`` has them)."""
 
     def __init__(self, shape, seed: int = 0, engine: str = "taichi", arch: str | None = None,
                  background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, history: bool = True, **params):
@@ -138,14 +138,20 @@ class MMPHDTracker(OneSequence):
         self.online_rows.extend(released)
         return released
 
+    def online(self) -> np.ndarray:
+        """The rows as ``update`` output them (from confirmation on)."""
+        return self._table(self.online_rows)
+
     def finish(self) -> np.ndarray:
-        """Every confirmed track's rows (whole paths), or the rows as output with ``history=False``."""
+        """Every confirmed track's rows (whole paths); with ``history=False`` none (``update`` output them)."""
         self._close_sequence()
         self.pool.release()
         if self._backward is not None:
             self._backward.pool.release()
-        rows = self.online_rows if not self.history else \
-            self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
+        rows = [] if not self.history else self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
+        return self._table(rows)
+
+    def _table(self, rows) -> np.ndarray:
         table = np.array([tuple(r) for r in rows], dtype=track_dtype(self.d.models))
         return np.sort(table, order=["frame", "track_id"])
 
