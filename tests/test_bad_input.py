@@ -43,6 +43,8 @@ def files(tmp_path_factory):
     np.save(d / "complex.npy", good.astype(np.complex64))
     np.save(d / "2d.npy", good[0])
     np.save(d / "tiny.npy", good[:, :4, :4])
+    np.save(d / "small.npy", good[:, :8, :8])
+    np.save(d / "two.npy", good[:2])
     np.save(d / "empty.npy", np.zeros((0, 24, 28), np.float32))
     (d / "garbage.npy").write_bytes(b"\x93NUMPY garbage" + bytes(range(256)))
     (d / "corrupt.mp4").write_bytes(rng.integers(0, 256, 4096, dtype=np.uint8).tobytes())
@@ -85,6 +87,7 @@ EVAL = ["evaluate", "--tracks", "{d}/tracks.csv", "--truth", "{d}/points.csv"]
 SIM = ["simulate", "--shape", "32", "32", "--frames", "4", "--snr", "2", "--out", "{d}/sim.npz"]
 BENCH = ["bench", "--shape", "32", "32", "--frames", "2"]
 SUITE = ["evaluate-suite", "--quick", "--out-dir", "{d}/suite"]
+MMPHD = TRACK + ["--method", "mm-phd"]
 
 # (case id, argument list, text the one-line message must contain)
 CLI_CASES = [
@@ -157,6 +160,23 @@ CLI_CASES = [
     ("track-truth-short-row", TRACK + ["--truth", "{d}/short_row.csv"], "line 3"),
     ("track-truth-no-columns", TRACK + ["--truth", "{d}/no_xy.csv"], "no_xy.csv"),
     ("track-truth-is-folder", TRACK + ["--truth", "{d}"], "no such file"),
+    # track --method mm-phd: its parameters and inputs (issue 37)
+    ("mmphd-input-nan", ["track", "{d}/nan.npy", "--method", "mm-phd", "--out", "{d}/out.csv"], "frame 7"),
+    ("mmphd-input-inf", ["track", "{d}/inf.npy", "--method", "mm-phd", "--out", "{d}/out.csv"], "frame 7"),
+    ("mmphd-two-frames", ["track", "{d}/two.npy", "--method", "mm-phd", "--out", "{d}/out.csv"], "3"),
+    ("mmphd-frame-below-window", ["track", "{d}/small.npy", "--method", "mm-phd", "--out", "{d}/out.csv",
+                                  "--param", "psf_sigma=1.5"], "window"),
+    ("mmphd-switch-rows", MMPHD + ["--param", "switch=0.5,0.1,0.1;0.3,0.6,0.1;0.3,0.1,0.6"], "switch"),
+    ("mmphd-switch-shape", MMPHD + ["--param", "switch=0.5,0.5"], "switch"),
+    ("mmphd-birth-models", MMPHD + ["--param", "birth_models=0.5,0.1,0.1"], "birth_models"),
+    ("mmphd-imin-above-imax", MMPHD + ["--param", "i_min=20", "--param", "i_max=10"], "i_min"),
+    ("mmphd-sigma-zero", MMPHD + ["--param", "psf_sigma=0"], "psf_sigma"),
+    ("mmphd-interval-zero", MMPHD + ["--param", "frame_interval=0"], "frame_interval"),
+    ("mmphd-births-zero", MMPHD + ["--param", "births=0"], "births"),
+    ("mmphd-lmax-negative", MMPHD + ["--param", "max_particles=-4"], "max_particles"),
+    ("mmphd-omega-zero", MMPHD + ["--param", "omega=0"], "omega"),
+    ("mmphd-model-unknown", MMPHD + ["--param", "models=cv,zigzag"], "models"),
+    ("mmphd-pool-overflow", MMPHD + ["--param", "max_tracks=1024", "--param", "max_particles=1000000"], "GiB"),
     # simulate
     ("simulate-shape-huge", ["simulate", "--shape", "20000", "20000", "--frames", "100", "--snr", "2",
                              "--out", "{d}/s.npz"], "GiB"),
@@ -283,6 +303,13 @@ def frame_with_nan():
     tracker.update(bad)
 
 
+def mm_phd_two_frames():
+    tracker = tbd.make_tracker("mm-phd", (24, 28), births=50, max_particles=100)
+    tracker.update(FRAME)
+    tracker.update(FRAME)
+    tracker.finish()
+
+
 API_CASES = [
     ("seed-negative", lambda: api_tracker(seed=-1), ParameterError, "seed"),
     ("seed-fraction", lambda: api_tracker(seed=1.5), ParameterError, "seed"),
@@ -311,6 +338,13 @@ API_CASES = [
     ("evaluate-ospa-c-zero", lambda: metrics.evaluate([], [], ospa_c=0), ParameterError, "ospa_c"),
     ("evaluate-ospa-p-half", lambda: metrics.evaluate([], [], ospa_p=0.5), ParameterError, "ospa_p"),
     ("box-scores-no-size", lambda: metrics.box_scores([], [(0, 1, 2)], 5), ParameterError, "boxes"),
+    ("mmphd-switch-rows", lambda: tbd.make_tracker("mm-phd", (24, 28), switch="0.5,0.5,0; 0,1,0; 0,0,0.9"),
+     ParameterError, "switch"),
+    ("mmphd-omega-zero", lambda: tbd.make_tracker("mm-phd", (24, 28), omega=0.0), ParameterError, "omega"),
+    ("mmphd-model-unknown", lambda: tbd.make_tracker("mm-phd", (24, 28), models="cv,jump"), ParameterError,
+     "models"),
+    ("mmphd-below-window", lambda: tbd.make_tracker("mm-phd", (8, 8), psf_sigma=1.5), ParameterError, "window"),
+    ("mmphd-two-frames", mm_phd_two_frames, InputError, "3 frames"),
     ("simulate-shape-huge", lambda: tbd.simulate((20000, 20000), 100), ParameterError, "GiB"),
     ("simulate-frames-zero", lambda: tbd.simulate((32, 32), 0), ParameterError, "frames"),
     ("simulate-snr-inf", lambda: tbd.simulate((32, 32), 5, snr=np.inf), ParameterError, "snr"),

@@ -5,7 +5,7 @@ from ...tables import TRACK_COLUMNS
 from ..registry import MethodSpec, keyword_factory
 from .params import MMPHDParams, mm_phd_params, pool_capacity
 from .params import derived
-from .tracker import MMPHDTracker, track_columns
+from .tracker import MIN_FRAMES, MMPHDTracker, track_columns
 
 __all__ = ["MMPHDTracker", "MMPHDParams", "SPEC"]
 
@@ -16,7 +16,7 @@ SPEC = MethodSpec(
     description="multiple-model particle PHD filter on the pixels for a changing number of dim manoeuvring "
                 "targets: a detector with births, one tracker per captured target, backward recursion",
     params=MMPHDParams, factory=keyword_factory(MMPHDTracker), make_params=mm_phd_params,
-    scenario="long2012", min_frames=3,
+    scenario="long2012", min_frames=MIN_FRAMES,
     options=("background", "bad_pixels", "history"),
     aliases={"particles": "max_particles"},
     rank=2, particle_count=lambda shape, params: pool_capacity(params),

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...background import DEFAULT_BACKGROUND, Preprocessor
+from ...errors import InputError
 from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
 from ...tables import TRACK_COLUMNS
@@ -28,6 +29,7 @@ from .params import derived, mm_phd_params, pool_capacity
 from .pool import PhdPool
 
 STAGES = ("normalise", "filter", "extraction", "backward")
+MIN_FRAMES = 3  # §4.2: a track needs three tracked frames
 
 
 def track_columns(models) -> tuple[str, ...]:
@@ -144,6 +146,9 @@ class MMPHDTracker(OneSequence):
 
     def finish(self) -> np.ndarray:
         """Every confirmed track's rows (whole paths); with ``history=False`` none (``update`` output them)."""
+        if self.frames_in < MIN_FRAMES:
+            raise InputError(f"{self.frames_in} frame(s), but MM-PHD needs at least {MIN_FRAMES} frames "
+                             f"(a track is confirmed after {self.p.confirm_frames} tracked frames)")
         self._close_sequence()
         self.pool.release()
         if self._backward is not None:
