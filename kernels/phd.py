@@ -43,7 +43,7 @@ GROUP_FLOAT = ("qscale", "out_weight", "cx", "cy", "radius")
 START, LENGTH, FRAME, OUT_START, OUT_LEN, OUT_ID = range(len(GROUP_INT))
 QSCALE, OUT_WEIGHT, CX, CY, RADIUS = range(len(GROUP_FLOAT))
 NO_CENTRE = -1.0e6  # cx of a group whose class is centred on its peak cell
-N_HAT, TOTAL = 0, 1  # columns of gout: n̂, resampling total
+N_HAT, TOTAL, TOP = 0, 1, 2  # columns of gout: n̂, resampling total, the largest cell mass
 EST_MEAN, EST_COV, EST_PROB = 0, DIM, DIM + DIM * DIM  # columns of est: mean (7), covariance (7×7), P_r (4)
 EST_MASS = EST_PROB + MAX_MODELS  # the PHD mass Σw̃ of the class (Eq. 19 over the class)
 EST_PEAK = EST_MASS + 1  # the PHD mass Ψ/(λ + Ψ) of the class's peak cell
@@ -89,7 +89,7 @@ class PhdKernels:
         # group tables (columns GROUP_INT, GROUP_FLOAT): input segment, frame (0 raw, 1 masked), output segment
         # and new id; Q scale s_g, output weight, gate centre and radius; results n̂_g, total_g; estimates (EST_*)
         self.gint, self.gflt = ti.field(ti.i32, (g, len(GROUP_INT))), ti.field(ti.f32, (g, len(GROUP_FLOAT)))
-        self.gout = ti.field(ti.f32, (g, 2))
+        self.gout = ti.field(ti.f32, (g, 3))
         self.est = ti.field(ti.f32, (g, EST_WIDTH))
         self.psi = ti.field(ti.f32, (g, h * w))
         self.raw, self.masked = ti.field(ti.f32, (h, w)), ti.field(ti.f32, (h, w))
@@ -198,7 +198,8 @@ class PhdKernels:
         measurement cell (Eqs. 15–16), w̃ = wℓ'/(λe^(−m) + Ψ') = ℓw/(λ + Ψ) (Eq. 14), and w̃ = ``miss``·w
         (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
-        its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell.  Ψ is cleared afterwards."""
+        its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell and top its largest value.  Ψ is
+        cleared afterwards."""
         w = ti.static(self.shape[1])
         span = ti.static(self.span)
         for it in range(n_groups * span):
@@ -213,7 +214,7 @@ class PhdKernels:
                     if self.measured(self.cell[p], src, th, w):
                         self.psi[g, self.cell[p]] += self.weight[p] * ti.exp(self.loglik[p] - m)
                 lam_m = lam * ti.exp(ti.min(-m, 80.0))
-                n_hat, cum = ti.f32(0.0), ti.f32(0.0)
+                n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
                 for p in range(a, b):
                     wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
                     if self.measured(self.cell[p], src, th, w):
@@ -227,6 +228,7 @@ class PhdKernels:
                         rho = miss * ti.exp(self.loglik[p] - m) if on_likelihood != 0 else wt
                     self.wtilde[p] = wt
                     self.cellmass[p] = mass
+                    top = ti.max(top, mass)
                     n_hat += wt
                     cum += rho
                     self.cdf[p] = cum
@@ -235,6 +237,7 @@ class PhdKernels:
                         self.psi[g, self.cell[p]] = 0.0
                 self.gout[g, N_HAT] = n_hat
                 self.gout[g, TOTAL] = cum
+                self.gout[g, TOP] = top
 
     @ti.func
     def measured(self, cell: ti.i32, src: ti.i32, th: ti.f32, w: ti.template()) -> ti.i32:
@@ -365,6 +368,26 @@ class PhdKernels:
 
 
     # ------------------------------------------------------------------ host transfers
+
+    def slots(self, start: int, count: int) -> dict:
+        """Copies of slots [start, start + count): state, model, w̃ and cell mass."""
+        out = {"state": np.zeros((count, DIM), np.float32), "model": np.zeros(count, np.int32),
+               "wtilde": np.zeros(count, np.float32), "cellmass": np.zeros(count, np.float32)}
+        if count > 0:
+            self.copy_slots(start, out["state"], out["model"], out["wtilde"], out["cellmass"])
+        return out
+
+    @ti.kernel
+    def copy_slots(self, start: ti.i32, state: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                   model: ti.types.ndarray(dtype=ti.i32, ndim=1), wtilde: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                   cellmass: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        """state, model, w̃, cell mass ← slots [start, start + len(model))."""
+        for p in range(model.shape[0]):
+            for d in ti.static(range(DIM)):
+                state[p, d] = self.state[start + p, d]
+            model[p] = self.model[start + p]
+            wtilde[p] = self.wtilde[start + p]
+            cellmass[p] = self.cellmass[start + p]
 
     def put(self, name: str, values) -> None:
         """Field ``name`` ← ``values`` (its whole shape)."""

@@ -1,7 +1,8 @@
 """``tbd-taichi bench``: median ms/frame per stage, Taichi against NumPy in the same run.
 
 A method's whole pipeline (``method``, any registered one; default SGDS-PF) runs through the public API, one
-``update`` per frame with the preset of ``snr``, on a simulated sequence of that SNR.  Stages are the tracker's
+``update`` per frame with the preset of ``snr`` (or the method's ``bench_settings``), on a simulated sequence of
+that SNR (or the method's ``bench_scene``: MM-PHD's has three targets at 13 dB and §5.3's settings).  Stages are the tracker's
 ``timings`` (each timed per frame after a warm-up, median over the timed frames); SGDS-PF's:
 
 * ``normalise``: z = (frame − median)/(1.4826·MAD) on the host;
@@ -90,7 +91,7 @@ def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
         if "frontend_process" not in spec.options:
             raise ParameterError(f"--frontend-process applies to sgds only, not to {method}")
         options["frontend_process"] = True
-    tracker = methods.make_tracker(method, shape, snr=snr, engine=engine, **options)
+    tracker = methods.make_tracker(method, shape, engine=engine, **spec.bench_keywords(snr), **options)
 
     def step(frame: np.ndarray) -> dict[str, float]:
         before = tracker.timings
@@ -223,10 +224,10 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
     from . import methods
 
-    methods.get(method)  # an unknown method fails here, before the sequence is simulated
+    scene = {"snr": snr, "motion": "transit", **methods.get(method).bench_scene}  # an unknown method fails here
     backend.keep_freed_memory()
     cfg = backend.init(arch)
-    frames = simulate(tuple(shape), frames=n_frames + WARMUP, snr=snr, seed=seed, motion="transit").frames
+    frames = simulate(tuple(shape), frames=n_frames + WARMUP, seed=seed, **scene).frames
     result = {"method": method, "shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
               "frontend_process": bool(frontend_process and pipeline), "runs": runs, "paired": bool(paired),
@@ -267,7 +268,7 @@ def format_table(result: dict) -> str:
         vals = {n: _row_value(engines[n], stage) for n in names}
         row = f"{stage:<12}" + "".join(f"{vals[n]:>14.3f}" for n in names)
         if ratio and stage not in ("fps", "peak MiB", "kernels", "host"):
-            row += f"{vals['numpy'] / vals['taichi']:>13.1f}x"
+            row += f"{vals['numpy'] / vals['taichi']:>13.1f}x" if vals["taichi"] > 0 else f"{'-':>14}"
         lines.append(row)
     if result.get("runs", 1) > 1:
         for n in names:

@@ -95,8 +95,7 @@ def check_bench(args) -> list[str]:
         raise TBDError(f"--particles {args.particles} must be at least --groups {args.groups} (or 0: off)")
     shape = validate.frame_shape("--shape", args.shape)
     spec = methods.get(args.method)
-    params = spec.make_params(shape, snr=args.snr) if "snr" in {p.name for p in spec.param_infos()} else \
-        spec.make_params(shape)
+    params, _ = methods.checked_settings(spec, shape, spec.bench_keywords(args.snr))
     frames_as_particles = shape[0] * shape[1] * args.frames * 4 // validate.PARTICLE_BYTES  # the simulated frames
     validate.tracker_memory(f"bench --shape {shape[0]} {shape[1]} ({len(engines)} engine(s))", shape,
                             lambda: spec.particles(shape, params) * len(engines)

@@ -229,6 +229,8 @@ class MethodSpec:
     rank: int = 100  # listing order (tables, --help): the flagship first
     particle_count: Callable | None = None  # (shape, params) -> particles the tracker is configured with
     extra_columns: Callable | None = None  # params -> columns its tracks rows carry after TRACK_COLUMNS
+    bench_settings: Callable | None = None  # snr -> make_tracker keywords the bench uses (None: {"snr": snr})
+    bench_scene: Mapping = field(default_factory=dict)  # the bench's simulate() keywords (targets, snr, motion)
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -242,6 +244,10 @@ class MethodSpec:
         from ..tables import TRACK_COLUMNS
 
         return TRACK_COLUMNS + (tuple(self.extra_columns(params)) if self.extra_columns else ())
+
+    def bench_keywords(self, snr: float) -> dict:
+        """The keywords ``tbd-taichi bench`` makes this method's tracker with for the SNR preset ``snr``."""
+        return dict(self.bench_settings(snr)) if self.bench_settings else {"snr": snr}
 
     def particles(self, shape, params) -> int:
         """The particles a tracker of ``params`` for frames of ``shape`` is configured with (0 if it does not say)."""

@@ -7,7 +7,7 @@ import numpy as np
 from ..kernels.phd import (BETA_ROW, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
-                           SQRT_HALF, START, TOTAL)
+                           SQRT_HALF, START, TOP, TOTAL)
 from .rng import normal, uniform
 
 F32 = np.float32
@@ -43,7 +43,7 @@ class PhdKernels:
         self.weight, self.weight2, self.loglik, self.wtilde, self.cdf, self.cellmass = (np.zeros(c, F32) for _ in range(6))
         self.cell = np.zeros(c, np.int32)
         self.gint, self.gflt = np.zeros((g, len(GROUP_INT)), np.int32), np.zeros((g, len(GROUP_FLOAT)), F32)
-        self.gout, self.est = np.zeros((g, 2), F32), np.zeros((g, EST_WIDTH), F32)
+        self.gout, self.est = np.zeros((g, 3), F32), np.zeros((g, EST_WIDTH), F32)
         self.raw, self.masked = np.zeros((h, w), F32), np.zeros((h, w), F32)
         self.cells = np.zeros(h * w, np.int32)
         self.F, self.F_inv, self.L = (np.zeros((MAX_MODELS, DIM, DIM), F32) for _ in range(3))
@@ -53,6 +53,12 @@ class PhdKernels:
         """Array ``name`` ← ``values`` (its whole shape)."""
         target = getattr(self, name)
         target[...] = np.asarray(values).reshape(target.shape)
+
+    def slots(self, start: int, count: int) -> dict:
+        """Copies of slots [start, start + count): state, model, w̃ and cell mass."""
+        sl = slice(start, start + count)
+        return {"state": self.state[sl].copy(), "model": self.model[sl].copy(), "wtilde": self.wtilde[sl].copy(),
+                "cellmass": self.cellmass[sl].copy()}
 
     def get(self, name: str) -> np.ndarray:
         """A copy of array ``name``."""
@@ -136,6 +142,7 @@ class PhdKernels:
             self.cdf[a:b] = np.cumsum(rho.astype(F32), dtype=F32)
             self.gout[g, N_HAT] = self.wtilde[a:b].sum(dtype=F32)
             self.gout[g, TOTAL] = self.cdf[b - 1] if b > a else 0.0
+            self.gout[g, TOP] = self.cellmass[a:b].max(initial=0.0)
 
     def estimate(self, first_group: int, n_groups: int, radius: float) -> None:
         """Each group's class around the cell of largest PHD mass inside its gate: mass, weighted mean,

@@ -24,7 +24,7 @@ class BackwardRecursion:
     def rows(self, capture: Capture, frames: list[tuple[int, np.ndarray]], track_id: int) -> list[tuple]:
         """(frame, mean, model probabilities, peak-cell mass) for each frame the target is tracked going back
         through ``frames`` = [(frame index, z), …] (newest first, the capture's frame excluded), until
-        ``halt_drops`` consecutive drops (peak-cell mass < drop_below)."""
+        ``halt_drops`` consecutive drops (peak-cell mass < confirm_above: going back is as speculative as a new track)."""
         p, pool = self.p, self.pool
         keep = gated(capture, self.dims, p.gate_probability)  # Eq. 25
         state, model = capture.state[keep], capture.model[keep]
@@ -41,7 +41,7 @@ class BackwardRecursion:
             pool.propagate(key, n, 0, backward=True)  # Eqs. 26–27
             pool.weigh(0, 1)
             e = unpack(pool.estimates(0, 1)[0], len(self.d.models))
-            if e.peak >= p.drop_below:
+            if e.peak >= p.confirm_above:
                 drops = 0
                 mean, cov = e.mean, e.cov
                 out.append((frame, e.mean, e.probs, e.peak))

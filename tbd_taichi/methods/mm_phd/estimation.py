@@ -18,7 +18,7 @@ DET_FLOOR = 1e-12  # floor of |P̂| in Eq. 21's ratio (the print's ‖·‖ is t
 @dataclass
 class Capture:
     """One target the detector found: its particles (state, model), their mean X̂ and covariance P̂, model
-    probabilities (Eq. 35) and PHD mass (its share of n̂)."""
+    probabilities (Eq. 35), PHD mass (its share of n̂) and the PHD mass Ψ/(λ + Ψ) of its peak cell."""
 
     state: np.ndarray
     model: np.ndarray
@@ -26,6 +26,7 @@ class Capture:
     cov: np.ndarray
     probs: np.ndarray
     mass: float
+    peak: float = 1.0
 
 
 @dataclass
@@ -71,19 +72,20 @@ def adapted_scale(scale: np.ndarray, log_det_now: np.ndarray, log_det_before: np
     return np.where(grew, shrink, widen)
 
 
-def captures(state: np.ndarray, model: np.ndarray, wtilde: np.ndarray, n_hat: float, n_models: int,
-             merge_distance: float, radius: float, draws: int, rng: np.random.Generator) -> list[Capture]:
+def captures(det: dict, n_hat: float, n_models: int, merge_distance: float, radius: float, draws: int,
+             rng: np.random.Generator) -> list[Capture]:
     """The detector's targets (§3.1): ``draws`` particles drawn ∝ w̃ (the updated PHD, Eq. 14, so that the
     classes follow its mass rather than the likelihood-resampled cloud's noise cells), k-means with round(n̂)
     classes on their positions, classes closer than ``merge_distance`` (6Σ, Eq. 12) merged; each class keeps
     its draws within ``radius`` px (per axis) of its densest pixel, and gives their mean, covariance, model
-    shares (Eq. 35) and mass n̂·(their share of the draws)."""
+    shares (Eq. 35), mass n̂·(their share of the draws) and largest cell mass; ``det``: the detector's slots
+    (:meth:`PhdKernels.slots`)."""
     k = int(round(n_hat))
-    w = wtilde.astype(float)
-    if k < 1 or len(state) == 0 or w.sum() <= 0:
+    w = det["wtilde"].astype(float)
+    if k < 1 or len(w) == 0 or w.sum() <= 0:
         return []
-    pick = rng.choice(len(state), size=draws, p=w / w.sum())
-    state, model = state[pick], model[pick]
+    pick = rng.choice(len(w), size=draws, p=w / w.sum())
+    state, model, cellmass = det["state"][pick], det["model"][pick], det["cellmass"][pick]
     pos = state[:, [X, Y]].astype(float)
     labels = np.zeros(draws, int) if k == 1 else kmeans2(pos, min(k, draws), minit="++", seed=rng)[1]
     labels = merged_labels(pos, labels, merge_distance)
@@ -94,15 +96,19 @@ def captures(state: np.ndarray, model: np.ndarray, wtilde: np.ndarray, n_hat: fl
         mean = st.mean(axis=0)
         d = st - mean
         probs = np.bincount(model[sel], minlength=n_models)[:n_models] / sel.sum()
-        out.append(Capture(state[sel], model[sel], mean, d.T @ d / sel.sum(), probs, n_hat * sel.sum() / draws))
+        out.append(Capture(state[sel], model[sel], mean, d.T @ d / sel.sum(), probs, n_hat * sel.sum() / draws,
+                           float(cellmass[sel].max())))
     return out
 
 
 def near_densest_pixel(pos: np.ndarray, members: np.ndarray, radius: float) -> np.ndarray:
     """The points within ``radius`` px per axis of the centre of the pixel holding most of the ``members``."""
-    pix = np.floor(pos[members] + 0.5).astype(int)
-    cells, counts = np.unique(pix, axis=0, return_counts=True)
-    cx, cy = cells[np.argmax(counts)]
+    pix = np.floor(pos[members] + 0.5).astype(np.int64)
+    lo = pix.min(axis=0)
+    span = pix.max(axis=0) - lo + 1
+    flat = (pix[:, 1] - lo[1]) * span[0] + (pix[:, 0] - lo[0])
+    best = int(np.argmax(np.bincount(flat)))
+    cx, cy = best % span[0] + lo[0], best // span[0] + lo[1]
     return (np.abs(pos[:, 0] - cx) <= radius) & (np.abs(pos[:, 1] - cy) <= radius)
 
 

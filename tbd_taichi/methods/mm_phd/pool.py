@@ -6,7 +6,7 @@ import numpy as np
 
 from ...engines import kernel_module
 from ...kernels.phd import (CX, CY, FRAME, GROUP_FLOAT, GROUP_INT, LENGTH, NO_CENTRE, OUT_ID, OUT_LEN,
-                             N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START)
+                             N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
 from ...motion_models import DIM, model_set
 from .params import P_DETECT, Derived, MMPHDParams
 
@@ -128,9 +128,10 @@ class PhdPool:
         c = np.asarray(centres, np.float32).reshape(-1, 2)
         self.k.mask(c if len(c) else self.no_centre, self.d.half + self.p.mask_margin, self.p.mask_value)
 
-    def n_hat(self) -> np.ndarray:
-        """n̂ of each group of the layout (Eq. 19)."""
-        return self.k.get("gout")[:self.n_groups, N_HAT].astype(float)
+    def n_hat(self) -> tuple[np.ndarray, np.ndarray]:
+        """n̂ of each group of the layout (Eq. 19) and the largest PHD mass Ψ/(λ + Ψ) of one of its cells."""
+        out = self.k.get("gout")[:self.n_groups].astype(float)
+        return out[:, N_HAT], out[:, TOP]
 
     def resample(self, frame_key: int, out_lengths, out_weights, keep, room: int = 0) -> int:
         """Each group g to ``out_lengths[g]`` particles of weight ``out_weights[g]`` (0 length: the group ends),
@@ -150,10 +151,9 @@ class PhdPool:
         self.k.commit(total)
         return total
 
-    def particles(self, start: int, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(state (count, 7), model (count,), w̃ (count,)) of slots [start, start + count), copied to the host."""
-        sl = slice(start, start + count)
-        return self.k.get("state")[sl], self.k.get("model")[sl], self.k.get("wtilde")[sl]
+    def particles(self, start: int, count: int) -> dict:
+        """Slots [start, start + count) on the host: state (count, 7), model, w̃ and cell mass."""
+        return self.k.slots(start, count)
 
     def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
         """Slots [offset, offset + n) ← the particles ``state``, ``model`` of weight ``weight`` in ``group``."""

@@ -11,6 +11,7 @@ the detector's particles are split by k-means into round(n̂) classes, and a cla
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -28,8 +29,9 @@ from .estimation import Capture, adapted_scale, captures, live_dims, log_det, un
 from .params import derived, mm_phd_params, pool_capacity
 from .pool import PhdPool
 
-STAGES = ("normalise", "filter", "extraction", "backward")
+STAGES = ("normalise", "particles", "extraction", "backward")
 MIN_FRAMES = 3  # §4.2: a track needs three tracked frames
+CAPTURE_DRAWS = 1000  # particles drawn ∝ w̃ from the detector for k-means (a new tracker resamples them to L_max)
 
 
 def track_columns(models) -> tuple[str, ...]:
@@ -72,6 +74,32 @@ class Target:
         self.velocity_sd = float(np.sqrt(max(cov[VX, VX], cov[VY, VY], 0.0)))
 
 
+class StageClock:
+    """Wall seconds per stage, exclusive: a stage entered inside another pauses the outer one's count."""
+
+    def __init__(self, stages):
+        self.seconds = {s: 0.0 for s in stages}
+        self.stack: list[list] = []
+
+    @contextlib.contextmanager
+    def __call__(self, stage: str):
+        now = time.perf_counter()
+        if self.stack:
+            outer = self.stack[-1]
+            self.seconds[outer[0]] += now - outer[1]
+        self.stack.append([stage, now])
+        try:
+            yield
+        finally:
+            now = time.perf_counter()
+            self.seconds[stage] += now - self.stack.pop()[1]
+            if self.stack:
+                self.stack[-1][1] = now
+
+    def totals(self) -> dict:
+        return dict(self.seconds)
+
+
 def tracker_start(c: Capture, count: int, vmax: float, fresh: float, rng: np.random.Generator):
     """A new tracker's ``count`` particles: the capture's drawn with replacement, a ``fresh`` share of them with
     the velocity drawn anew from Eq. 29's U[−V_max, V_max] (the detector's likelihood-resampled particles carry
@@ -106,7 +134,7 @@ class MMPHDTracker(OneSequence):
         self.online_rows: list[tuple] = []
         self.n_hat_history: list[float] = []
         self.confirmations: dict[int, int] = {}
-        self.stage_seconds = {s: 0.0 for s in STAGES}
+        self.clock = StageClock(STAGES)
         self._backward = None
 
     @property
@@ -116,26 +144,24 @@ class MMPHDTracker(OneSequence):
 
     @property
     def timings(self) -> dict:
-        """Cumulative wall seconds per stage (STAGES)."""
-        return dict(self.stage_seconds)
+        """Cumulative wall seconds per stage (STAGES): normalise; particles (every kernel step: predict, births,
+        likelihood, Ψ, update, class estimates, mask, resample); extraction (k-means captures, bookkeeping, new
+        trackers); backward (the backward recursions)."""
+        return self.clock.totals()
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Process one raw frame; returns the rows of confirmed tracks at this frame."""
         self._check_open("update")
-        t0 = time.perf_counter()
-        z = self.preprocess(frame, self.frame)
+        with self.clock("normalise"):
+            z = self.preprocess(frame, self.frame)
         k = self.frame
         self.buffer.append((k, z))
-        t1 = time.perf_counter()
-        n_hat, est = self._filter_step(k, z)
-        t2 = time.perf_counter()
-        released = self._bookkeeping(k, n_hat, est)
-        self._resample_and_capture(k, n_hat)
+        with self.clock("particles"):
+            n_hat, est = self._filter_step(k, z)
+        with self.clock("extraction"):
+            released = self._bookkeeping(k, n_hat, est)
+            self._resample_and_capture(k, n_hat)
         self.n_hat_history.append(float(n_hat[0]))
-        t3 = time.perf_counter()
-        self.stage_seconds["normalise"] += t1 - t0
-        self.stage_seconds["filter"] += t2 - t1
-        self.stage_seconds["extraction"] += t3 - t2 - self._backward_seconds
         self.frame += 1
         self.online_rows.extend(released)
         return released
@@ -177,20 +203,20 @@ class MMPHDTracker(OneSequence):
         est = pool.estimates(1, n_tr)
         pool.mask(est[1:1 + n_tr, [X, Y]])
         pool.weigh(0, 1, on_likelihood=self.p.detector_resampling == "likelihood", segmented=True)
-        return pool.n_hat(), est
+        n_hat, self.det_top = pool.n_hat()
+        return n_hat, est
 
     def _bookkeeping(self, k: int, n_hat: np.ndarray, est: np.ndarray) -> list[tuple]:
         """Each tracker's frame: tracked (n̂ ≥ drop_below) or dropped, confirmation (then the backward
         recursion), halting, Eq. 21's Q scale; returns the rows released now."""
         p, released = self.p, []
-        self._backward_seconds = 0.0
         if not self.targets:
             return released
         stats = [unpack(est[1 + i], len(self.d.models)) for i in range(len(self.targets))]
         for t, e in zip(self.targets, stats):
             t.follow(e.mean, e.cov, e.mass, self.p.frame_interval)
             t.mass = e.peak
-            if e.peak >= p.drop_below:
+            if e.peak >= (p.drop_below if t.confirmed else p.confirm_above):
                 t.streak, t.drops = t.streak + 1, 0
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
                 if t.confirmed:
@@ -225,26 +251,25 @@ class MMPHDTracker(OneSequence):
         self.confirmations[t.track_id] = k
         if not self.p.backward:
             return
-        t0 = time.perf_counter()
-        if self._backward is None:
-            self._backward = BackwardRecursion(self.shape, self.p, self.d, self.seed, self.engine, self.arch)
-        earlier = [(f, z) for f, z in reversed(self.buffer) if f < t.first_frame]
-        back = self._backward.rows(t.capture, earlier, t.track_id)
+        with self.clock("backward"):
+            if self._backward is None:
+                self._backward = BackwardRecursion(self.shape, self.p, self.d, self.seed, self.engine, self.arch)
+            earlier = [(f, z) for f, z in reversed(self.buffer) if f < t.first_frame]
+            back = self._backward.rows(t.capture, earlier, t.track_id)
         t.rows[:0] = [self._row(f, t.track_id, mean, probs, nh) for f, mean, probs, nh in reversed(back)]
-        spent = time.perf_counter() - t0
-        self._backward_seconds += spent
-        self.stage_seconds["backward"] += spent
 
     def _resample_and_capture(self, k: int, n_hat: np.ndarray) -> None:
         """The detector's captures (before resampling), then every filter resampled to L_max (ended trackers
         dropped; a tracker's mass at most one target), then the captures become trackers."""
         p, L = self.p, self.p.max_particles
         det_len = int(self.pool.gint[0, LENGTH])
-        found = self._captures(k, n_hat[0], det_len) if round(n_hat[0]) >= 1 else []
+        found = self._captures(k, n_hat[0], det_len) \
+            if round(n_hat[0]) >= 1 and self.det_top[0] >= p.confirm_above else []
         out_len = [L] + [L] * len(self.targets)
         weights = [n_hat[0] / L] + [1.0 / L] * len(self.targets)  # a tracker holds one target (see docs)
         keep = [True] + [not t.halted for t in self.targets]
-        offset = self.pool.resample(k, out_len, weights, keep, room=p.births)
+        with self.clock("particles"):
+            offset = self.pool.resample(k, out_len, weights, keep, room=p.births)
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(t.rows)
@@ -267,16 +292,15 @@ class MMPHDTracker(OneSequence):
             self.next_id += 1
 
     def _captures(self, k: int, n_hat: float, det_len: int) -> list[Capture]:
-        """k-means on the detector's PHD (:func:`captures`); the classes of mass ≥ drop_below at least 6Σ from
-        every live tracker."""
+        """k-means on the detector's PHD (:func:`captures`); the classes whose peak cell holds PHD mass ≥
+        confirm_above, at least 6Σ from every live tracker."""
         p = self.p
-        state, model, wtilde = self.pool.particles(0, det_len)
+        det = self.pool.particles(0, det_len)
         gap = 6.0 * p.psf_sigma  # Eq. 12
         rng = np.random.default_rng([self.seed, k])
         live = [t.position for t in self.targets if not t.halted]
-        return [c for c in captures(state, model, wtilde, n_hat, len(self.d.models), gap, self.d.class_radius,
-                                    p.max_particles, rng)
-                if c.mass >= p.drop_below and all(np.hypot(*(c.mean[[X, Y]] - q)) >= gap for q in live)]
+        return [c for c in captures(det, n_hat, len(self.d.models), gap, self.d.class_radius, CAPTURE_DRAWS, rng)
+                if c.peak >= p.confirm_above and all(np.hypot(*(c.mean[[X, Y]] - q)) >= gap for q in live)]
 
     def _row(self, frame: int, track_id: int, mean: np.ndarray, probs: np.ndarray, n_hat: float) -> tuple:
         """A tracks row: velocities in px/frame (the state's px/s times T), confidence min(n̂, 1), then P_r."""
