@@ -167,10 +167,8 @@ class PhdKernels:
             row = ti.cast(ti.floor(y + 0.5), ti.i32)
             src = self.gint[self.group[p], FRAME]
             if 0 <= col < w and 0 <= row < h:
-                fx = ti.Vector([pixel_fraction(ti.cast(col + k, ti.f32), x, scale)
-                                for k in ti.static(range(-half, half + 1))], dt=ti.f32)
-                fy = ti.Vector([pixel_fraction(ti.cast(row + k, ti.f32), y, scale)
-                                for k in ti.static(range(-half, half + 1))], dt=ti.f32)
+                fx = self.fractions(col, x, scale, half)
+                fy = self.fractions(row, y, scale, half)
                 acc = ti.f32(0.0)
                 for a in ti.static(range(2 * half + 1)):
                     r = row + a - half
@@ -186,6 +184,14 @@ class PhdKernels:
             else:
                 self.cell[p] = -1
                 self.loglik[p] = LOG_ZERO
+
+    @ti.func
+    def fractions(self, centre: ti.i32, pos: ti.f32, scale: ti.f32, half: ti.template()):
+        """Eq. 4 along one axis for the 2·half + 1 pixels around ``centre``: ½[erf(edge_{k+1}) − erf(edge_k)] from
+        the 2·half + 2 pixel edges' erf (each edge shared by two pixels, as :func:`pixel_fraction` per pixel)."""
+        e = ti.Vector([erf((ti.cast(centre + k, ti.f32) - 0.5 - pos) * scale)
+                       for k in ti.static(range(-half, half + 2))], dt=ti.f32)
+        return ti.Vector([0.5 * (e[k + 1] - e[k]) for k in ti.static(range(2 * half + 1))], dt=ti.f32)
 
     # ------------------------------------------------------------------ update (Eqs. 14–16, 19, 24)
 
