@@ -50,7 +50,7 @@ class CsvTableWriter:
 
     def __init__(self, path, columns: tuple[str, ...]):
         self.columns = tuple(columns)
-        self.integer = [c in ("frame", "track_id", "target_id") for c in self.columns]
+        self.integer = [c in ("frame", "track_id", "target_id", "model") for c in self.columns]
         self.handle = open(path, "w", newline="")
         self.writer = csv.writer(self.handle)
         self.writer.writerow(self.columns)
