@@ -257,6 +257,10 @@ def box_centres(boxes: np.ndarray) -> np.ndarray:
     return tables.make_table(rows, tables.TRUTH_DTYPE)
 
 
+def _frame(value) -> str:
+    return "-" if value is None else str(value)
+
+
 def format_scores(scores: dict) -> str:
     """The scores as the lines ``track`` and ``evaluate`` print."""
     if scores.get("truth") == "boxes":
@@ -270,6 +274,11 @@ def format_scores(scores: dict) -> str:
                       f"mean EDT (px)      {scores['edt_mean']:.3f}",
                       f"false tracks       {scores['false_tracks']}",
                       f"OSPA (c={scores['ospa_c']:g}, p={scores['ospa_p']:g})  {scores['ospa']:.3f}",
+                      f"|cardinality error| {scores['cardinality_error']:.3f} per frame",
+                      f"P_TD (5 px)        {scores['p_td']:.3f}",
+                      "detected / halted  " + ", ".join(f"{t}: {_frame(scores['detection_frame'][t])}/"
+                                                        f"{_frame(scores['halt_frame'][t])}"
+                                                        for t in scores["detection_frame"]),
                       f"tracks / targets   {scores['tracks']} / {len(scores['targets'])}"])
 
 

@@ -256,6 +256,13 @@ def truth_scores(kind: str, tracks: np.ndarray, truth: np.ndarray, n_frames: int
         if n_frames is None:
             n_frames = int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
         return dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, n_frames, grow=box_margin))
+    from .track_detection import track_detection
+
     scores = evaluate(tracks, truth, t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, n_frames=n_frames)
-    scores.update(truth="points", t0=t0, ospa_c=ospa_c, ospa_p=ospa_p)
+    frames = n_frames if n_frames is not None else \
+        int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
+    long = track_detection(tracks, truth, frames)
+    scores.update(truth="points", t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, cardinality_error=long["cardinality_error"],
+                  p_td=long["p_td"], detection_frame={t: e["detection_frame"] for t, e in long["targets"].items()},
+                  halt_frame={t: e["halt_frame"] for t, e in long["targets"].items()})
     return scores
