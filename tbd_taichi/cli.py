@@ -131,6 +131,11 @@ def check_evaluate_suite(args) -> dict:
     chosen = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     if not chosen or set(chosen) - set(methods.names()):
         raise TBDError(f"--methods takes a comma list of {','.join(methods.names())}, got {args.methods!r}")
+    scenarios = {methods.get(m).scenario for m in chosen}
+    if args.scenario == "long2012" and chosen != ("mm-phd",):
+        raise TBDError(f"--scenario long2012 evaluates --methods mm-phd (and its ablations), got {args.methods!r}")
+    if args.scenario == "jia2022" and scenarios != {"jia2022"}:
+        raise TBDError(f"--methods {args.methods} is evaluated on --scenario {scenarios.pop()}; give it")
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
     sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
     tests = suite.QUICK["tests"] if args.quick and args.tests == 100 else args.tests
@@ -148,6 +153,8 @@ def cmd_evaluate_suite(args) -> int:
     from . import suite
 
     plan = args.checked
+    if args.scenario == "long2012":
+        return run_long2012_suite(args, plan["tests"], plan["out_dir"])
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
     runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
     out_dir.mkdir(exist_ok=True)
@@ -163,6 +170,23 @@ def cmd_evaluate_suite(args) -> int:
     print(suite.markdown_table(suite.summarise(results)))
     print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))
     return 0 if completed else 130
+
+
+def run_long2012_suite(args, tests: int, out_dir: Path) -> int:
+    """evaluate-suite --scenario long2012: Long et al.'s Tables 2–4 and Figs. 2, 4, 5, 7 (suite_long2012)."""
+    from . import suite_long2012
+    from .progress import frame_progress
+
+    out_dir.mkdir(exist_ok=True)
+    runs = suite_long2012.plan(tests, args.seed)
+    print(f"{len(runs)} runs (§5.3 and §5.2 x MM-PHD, SMC-PHD; §5.1 x 3 SNRs x standard, improved; {tests} each) "
+          f"-> {out_dir}")
+    with frame_progress("runs", len(runs), "off" if args.no_progress else "auto") as progress:
+        results = suite_long2012.execute(tests, out_dir, args.seed, progress)
+    command = (f"tbd-taichi evaluate-suite --methods mm-phd --scenario long2012 --tests {tests} --seed {args.seed} "
+               f"--out-dir {out_dir}")
+    print(f"report -> {suite_long2012.write_report(results, out_dir, command)}")
+    return 0
 
 
 def suite_defaults() -> tuple:
@@ -220,6 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "mean DSR, false tracks and ms/frame as a markdown table, JSON and PNG figures. "
                                     "Runs are appended to OUT_DIR/suite_runs.jsonl as they finish: Ctrl-C keeps them "
                                     "and a rerun skips them.")
+    es.add_argument("--scenario", choices=("jia2022", "long2012"), default="jia2022",
+                    help="jia2022: SGDS-PF's SNR x size suite (default); long2012: Long et al.'s §5 scenes for "
+                         "--methods mm-phd (Tables 2-4, Figs. 2, 4, 5, 7)")
     es.add_argument("--tests", type=number(whole, 1), default=100, help="sequences per condition (default 100)")
     es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition")
     es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
