@@ -1,0 +1,164 @@
+"""MM-PHD TBD end to end on Long et al. 2012's scenes (tbd_taichi.long2012), the tracker's PHD masses on a target
+and on noise, the CSV contract, reproducibility across thread counts and the engines' agreement.
+
+Thresholds are what the defaults reliably meet on these seeds (the Monte Carlo figures are in
+docs/results/long2012/long2012.md); each is well below the mean so that a change that breaks the filter, not
+noise, fails them."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import tbd_taichi as tbd
+from tbd_taichi.long2012 import CASES, simulate_long2012
+from tbd_taichi.methods.mm_phd import SECTION_5_3
+from tbd_taichi.track_detection import track_detection
+
+
+def run(case, seed, engine="taichi", **settings):
+    sc = simulate_long2012(case, seed=seed)
+    base = dict(SECTION_5_3) if case == "5.3" else {}
+    tracker = tbd.make_tracker("mm-phd", sc.frames.shape[1:], seed=seed, engine=engine, **{**base, **settings})
+    for frame in sc.frames:
+        tracker.update(frame)
+    tracks = tracker.finish()
+    return sc, tracker, tracks, track_detection(tracks, sc.truth, len(sc.frames),
+                                                confirmed=tracker.tracker.confirmations)
+
+
+def held(tracks, truth, gate=2.0):
+    """Per target, the share of its frames with a track row within ``gate`` px."""
+    out = []
+    for tid in np.unique(truth["target_id"]):
+        gt = truth[truth["target_id"] == tid]
+        hit = 0
+        for g in gt:
+            rows = tracks[tracks["frame"] == g["frame"]]
+            hit += bool(len(rows) and np.min(np.hypot(rows["x"] - g["x"], rows["y"] - g["y"])) < gate)
+        out.append(hit / len(gt))
+    return np.array(out)
+
+
+@pytest.mark.slow
+def test_section_5_2_three_manoeuvring_targets():
+    """§5.2, four seeds: every target detected in most runs (P_TD ≥ 0.75 pooled), targets 1 and 2 held through
+    both turns (≥ 60 % of their frames, pooled), at most one false track, mean OSPA < 2 px."""
+    results, holds, ospas = [], [], []
+    for seed in range(4):
+        sc, tracker, tracks, res = run("5.2", seed)
+        results.append(res)
+        holds.append(held(tracks, sc.truth))
+        ospas.append(tbd.metrics.mean_ospa(tracks, sc.truth, c=5.0, p=2.0, n_frames=len(sc.frames)))
+    p_td = sum(r["detected"] for r in results) / sum(r["n_targets"] for r in results)
+    assert p_td >= 0.75, p_td
+    assert np.mean(holds, axis=0)[:2].min() >= 0.6, np.mean(holds, axis=0)
+    assert sum(r["false_tracks"] for r in results) <= 1
+    assert np.mean(ospas) < 2.0, ospas
+
+
+@pytest.mark.slow
+def test_section_5_3_launches():
+    """§5.3's substitute scene with §5.3's settings, three seeds: the two 13 dB launches detected in most runs
+    and confirmed within 6 frames of their launch (frame 7), no false track."""
+    detected, delays, false = 0, [], 0
+    for seed in range(3):
+        sc, tracker, tracks, res = run("5.3", seed)
+        false += res["false_tracks"]
+        for t in ("0", "1"):
+            e = res["targets"][int(t)]
+            detected += e["detected"]
+            if e["detected"]:
+                delays.append(e["detection_frame"] - e["first"])
+    assert detected >= 4 and false == 0
+    assert np.median(delays) <= 6, delays
+
+
+def test_tracker_mass_on_a_target_and_after_it_vanishes():
+    """§5.1 at 12 dB: while the target is present the track's confidence (its class's peak-cell PHD mass, ≤ 1)
+    is ≥ 0.5 in every reported frame and ≈ 1 on the median; the track halts within 3 frames of the target's
+    last frame; on pure noise no track is confirmed and the detector's n̂ stays small (mean < 2)."""
+    sc = simulate_long2012("5.1", seed=3, snr_db=12.0)
+    tracker = tbd.make_tracker("mm-phd", sc.frames.shape[1:], seed=3)
+    for frame in sc.frames:
+        tracker.update(frame)
+    tracks = tracker.finish()
+    assert len(np.unique(tracks["track_id"])) == 1
+    assert tracks["confidence"].min() >= 0.5 and np.median(tracks["confidence"]) > 0.9
+    assert tracks["frame"].max() <= sc.truth["frame"].max() + 3
+    noise = np.random.default_rng(5).standard_normal((25, 40, 40)).astype(np.float32)
+    quiet = tbd.make_tracker("mm-phd", (40, 40), seed=5)
+    for frame in noise:
+        quiet.update(frame)
+    assert len(quiet.finish()) == 0
+    assert np.mean(quiet.tracker.n_hat_history) < 2.0
+
+
+def test_tracks_table_carries_model_probabilities():
+    """The tracks table has Eq. 35's model probabilities as columns, summing to 1 row by row, and velocities in
+    px/frame (T = 2 s on §5.3: twice the state's px/s)."""
+    sc, tracker, tracks, _ = run("5.3", 0)
+    names = [c for c in tracks.dtype.names if c.startswith("p_")]
+    assert names == ["p_ca", "p_c_ct", "p_ac_ct"]
+    assert np.allclose(sum(tracks[c] for c in names), 1.0, atol=1e-3)
+    spec = tbd.methods.get("mm-phd")
+    assert spec.track_columns(tbd.methods.get("mm-phd").make_params((100, 80), **SECTION_5_3))[-3:] == tuple(names)
+    assert np.median(np.abs(tracks["vy"])) > 1.0  # the launches climb at 0.6–1.7 px/s, i.e. 1.2–3.4 px/frame
+
+
+def test_history_off_returns_rows_as_output():
+    """history=False: update's rows (from confirmation on) are all there is; they are the whole paths' rows
+    from each confirmation on."""
+    sc = simulate_long2012("5.2", seed=1)
+    whole = tbd.make_tracker("mm-phd", (40, 40), seed=1)
+    online = tbd.make_tracker("mm-phd", (40, 40), seed=1, history=False)
+    out = []
+    for frame in sc.frames:
+        whole.update(frame)
+        out += online.update(frame)
+    w, o = whole.finish(), online.finish()
+    assert len(o) == 0 and len(out) > 0
+    confirmed = online.tracker.confirmations
+    expect = w[np.array([r["frame"] >= confirmed[int(r["track_id"])] for r in w])]
+    assert sorted((int(r[0]), int(r[1])) for r in out) == sorted((int(r["frame"]), int(r["track_id"])) for r in expect)
+
+
+def test_engines_agree():
+    """Taichi and the NumPy twins on §5.2 seed 0: the same targets found (each engine's P_TD ≥ 2/3) at close
+    positions (mean OSPA within 1 px of each other); the runs part ways only through f32 rounding."""
+    scores = {}
+    for engine in ("taichi", "numpy"):
+        sc, _, tracks, res = run("5.2", 0, engine=engine)
+        scores[engine] = (res["p_td"], tbd.metrics.mean_ospa(tracks, sc.truth, c=5.0, p=2.0, n_frames=40))
+    assert min(s[0] for s in scores.values()) >= 2 / 3
+    assert abs(scores["taichi"][1] - scores["numpy"][1]) < 1.0, scores
+
+
+@pytest.mark.slow
+def test_same_tracks_with_one_and_two_threads(tmp_path):
+    """The same CSV, byte for byte, with 1 and with 2 CPU threads (counter-based random numbers, group sums in
+    one thread each)."""
+    sc = simulate_long2012("5.2", seed=2)
+    np.save(tmp_path / "s.npy", sc.frames)
+    outs = []
+    for threads in (1, 2):
+        out = tmp_path / f"t{threads}.csv"
+        subprocess.run([sys.executable, "-m", "tbd_taichi", "track", str(tmp_path / "s.npy"), "--method", "mm-phd",
+                        "--threads", str(threads), "--out", str(out), "--progress", "off"], check=True,
+                       capture_output=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and outs[0].count(b"\n") > 10
+
+
+def test_cases_are_as_the_paper_says():
+    """§5.2's targets start at the paper's states (x − ½, y − ½, frame − 1) and §5.3's substitute keeps its frame,
+    launches and ends."""
+    sc = simulate_long2012("5.2", seed=0)
+    first = sc.truth[sc.truth["frame"] == 4]
+    assert np.allclose(sorted(zip(first["x"], first["y"])), [(14.5, 9.5), (24.5, 17.5)])
+    assert sc.truth["frame"][sc.truth["target_id"] == 2].min() == 9
+    c53 = simulate_long2012("5.3", seed=0)
+    assert c53.frames.shape == (42, 100, 80) and CASES["5.3"].T == 2.0
+    spans = [(int(c53.truth["frame"][c53.truth["target_id"] == t].min()),
+              int(c53.truth["frame"][c53.truth["target_id"] == t].max())) for t in range(3)]
+    assert spans == [(7, 28), (7, 28), (14, 33)]
