@@ -38,10 +38,24 @@ def _truth_csv_path(out: Path) -> Path:
 
 
 def check_simulate(args) -> None:
-    """The shape (sides ≥ 8), the memory the frames need, and the two output files."""
+    """The scenario's arguments (jia2022: --shape with sides ≥ 8, --frames, --snr; long2012: --case, --snr-db), the
+    memory the frames need, and the two output files."""
     from .simulate import check_memory
 
-    check_memory(validate.frame_shape("--shape", args.shape), args.frames)
+    if args.scenario == "long2012":
+        from .long2012 import check_case
+
+        given = [f for f, v in (("--shape", args.shape), ("--frames", args.frames), ("--snr", args.snr)) if v is not None]
+        if given:
+            raise TBDError(f"{given[0]} applies to --scenario jia2022; --scenario long2012 takes --case and --snr-db")
+        check_case(args.case, args.snr_db)
+    else:
+        missing = [f for f, v in (("--shape", args.shape), ("--frames", args.frames), ("--snr", args.snr)) if v is None]
+        if missing:
+            raise TBDError(f"--scenario jia2022 needs {', '.join(missing)}")
+        if args.snr_db is not None:
+            raise TBDError("--snr-db applies to --scenario long2012; jia2022 takes --snr")
+        check_memory(validate.frame_shape("--shape", args.shape), args.frames)
     out = validate.output_path("--out", args.out, (".npz",))
     validate.output_path("--out (its truth CSV)", _truth_csv_path(out))
 
@@ -49,14 +63,22 @@ def check_simulate(args) -> None:
 def cmd_simulate(args) -> int:
     from .simulate import simulate
 
-    scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
-                     seed=args.seed, motion=args.motion)
+    if args.scenario == "long2012":
+        from .long2012 import simulate_long2012
+
+        scene = simulate_long2012(args.case, seed=args.seed, snr_db=args.snr_db)
+        what = f"Long et al. 2012 §{args.case}"
+    else:
+        scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
+                         seed=args.seed, motion=args.motion)
+        what = f"SNR {args.snr}"
     out = Path(args.out)
     np.savez_compressed(out, frames=scene.frames, truth=scene.truth, params=json.dumps(scene.params))
     truth_csv = _truth_csv_path(out)
     tables.write_csv(scene.truth, truth_csv)
-    print(f"wrote {out} ({args.frames} frames of {args.shape[0]}x{args.shape[1]}, {args.targets} target(s), "
-          f"SNR {args.snr}) and {truth_csv}")
+    t, h, w = scene.frames.shape
+    print(f"wrote {out} ({t} frames of {h}x{w}, {len(np.unique(scene.truth['target_id']))} target(s), {what}) "
+          f"and {truth_csv}")
     return 0
 
 
@@ -201,12 +223,20 @@ def build_parser() -> argparse.ArgumentParser:
         "Coordinates: x = column, y = row, 0-based, pixel centres at integers; frames are 0-based."))
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    sim = sub.add_parser("simulate", help="simulate a sequence (SGDS-PF section 3.1)",
-                         description="Simulate dim targets in white Gaussian noise (SGDS-PF Eqs. 1, 14, 44-46). "
+    sim = sub.add_parser("simulate", help="simulate a sequence (SGDS-PF section 3.1, or Long et al. 2012 section 5)",
+                         description="Simulate dim targets in white Gaussian noise: SGDS-PF Eqs. 1, 14, 44-46 (--scenario jia2022) or Long et al. 2012 §5 with Eq. 4 and jitter (--scenario long2012 --case). "
                                      "Writes OUT (.npz with arrays 'frames' and 'truth') and OUT_truth.csv beside it.")
-    sim.add_argument("--shape", type=number(whole, validate.MIN_SIDE), nargs=2, metavar=("H", "W"), required=True, help="frame height and width, px (each ≥ 8)")
-    sim.add_argument("--frames", type=number(whole, 1), required=True, help="number of frames T (≥ 1)")
-    sim.add_argument("--snr", type=number(positive), required=True, help="target SNR of Eq. 1: centre-pixel signal / noise std")
+    sim.add_argument("--scenario", choices=("jia2022", "long2012"), default="jia2022",
+                     help="jia2022: SGDS-PF's targets (default); long2012: Long et al. 2012's §5 scenes (--case)")
+    sim.add_argument("--case", choices=("5.1", "5.2", "5.3"), default="5.2",
+                     help="long2012: 5.1 one CV target, 5.2 three manoeuvring targets (default), 5.3 three launches")
+    sim.add_argument("--snr-db", type=number(positive), default=None,
+                     help="long2012: every target's peak SNR of Eq. 5, dB (default: the paper's)")
+    sim.add_argument("--shape", type=number(whole, validate.MIN_SIDE), nargs=2, metavar=("H", "W"), default=None,
+                     help="jia2022: frame height and width, px (each ≥ 8)")
+    sim.add_argument("--frames", type=number(whole, 1), default=None, help="jia2022: number of frames T (≥ 1)")
+    sim.add_argument("--snr", type=number(positive), default=None,
+                     help="jia2022: target SNR of Eq. 1: centre-pixel signal / noise std")
     sim.add_argument("--targets", type=number(whole, 1), default=1, help="number of targets (≥ 1, default 1)")
     sim.add_argument("--seed", type=number(whole, 0), default=0, help="random seed, a whole number ≥ 0 (default 0)")
     sim.add_argument("--motion", choices=("stay", "transit"), default="stay",
