@@ -80,6 +80,9 @@ class MMPHDParams:
     drop_below: float = param(0.5, doc="a tracker drops the frame when its class's peak cell holds PHD mass "
                               "Ψ/(λ + Ψ) below this; a detector class below it is no capture", symbol="n̂",
                               source="not in the paper", low=0, high=1, low_closed=False, high_closed=False)
+    capture_above: float = param(0.8, doc="a detector class becomes a tracker when its peak cell holds at least "
+                                 "this PHD mass", source="not in the paper", low=0, high=1, low_closed=False,
+                                 high_closed=False)
     confirm_above: float = param(0.8, doc="a tentative tracker (and the backward recursion) counts a frame as "
                                  "tracked only when its class's peak cell holds at least this PHD mass (hysteresis: "
                                  "confirmed trackers hold on down to drop_below)", source="not in the paper", low=0,

@@ -216,8 +216,9 @@ class MMPHDTracker(OneSequence):
         for t, e in zip(self.targets, stats):
             t.follow(e.mean, e.cov, e.mass, self.p.frame_interval)
             t.mass = e.peak
-            if e.peak >= (p.drop_below if t.confirmed else p.confirm_above):
-                t.streak, t.drops = t.streak + 1, 0
+            if e.peak >= p.drop_below:
+                t.drops = 0
+                t.streak += t.confirmed or e.peak >= p.confirm_above  # a tentative track counts strong frames
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
                 if t.confirmed:
                     released.append(t.rows[-1])
@@ -264,7 +265,7 @@ class MMPHDTracker(OneSequence):
         p, L = self.p, self.p.max_particles
         det_len = int(self.pool.gint[0, LENGTH])
         found = self._captures(k, n_hat[0], det_len) \
-            if round(n_hat[0]) >= 1 and self.det_top[0] >= p.confirm_above else []
+            if round(n_hat[0]) >= 1 and self.det_top[0] >= p.capture_above else []
         out_len = [L] + [L] * len(self.targets)
         weights = [n_hat[0] / L] + [1.0 / L] * len(self.targets)  # a tracker holds one target (see docs)
         keep = [True] + [not t.halted for t in self.targets]
@@ -300,7 +301,7 @@ class MMPHDTracker(OneSequence):
         rng = np.random.default_rng([self.seed, k])
         live = [t.position for t in self.targets if not t.halted]
         return [c for c in captures(det, n_hat, len(self.d.models), gap, self.d.class_radius, CAPTURE_DRAWS, rng)
-                if c.peak >= p.confirm_above and all(np.hypot(*(c.mean[[X, Y]] - q)) >= gap for q in live)]
+                if c.peak >= p.capture_above and all(np.hypot(*(c.mean[[X, Y]] - q)) >= gap for q in live)]
 
     def _row(self, frame: int, track_id: int, mean: np.ndarray, probs: np.ndarray, n_hat: float) -> tuple:
         """A tracks row: velocities in px/frame (the state's px/s times T), confidence min(n̂, 1), then P_r."""
