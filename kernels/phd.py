@@ -206,44 +206,53 @@ class PhdKernels:
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
         its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell and top its largest value.  Ψ is
         cleared afterwards."""
-        w = ti.static(self.shape[1])
         span = ti.static(self.span)
         for it in range(n_groups * span):
             if it % span == 0:
-                g = first_group + it // span
-                a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
-                m = ti.f32(LOG_ZERO)
-                for p in range(a, b):
-                    m = ti.max(m, self.loglik[p])
-                src = self.gint[g, FRAME]
-                for p in range(a, b):
-                    if self.measured(self.cell[p], src, th, w):
-                        self.psi[g, self.cell[p]] += self.weight[p] * ti.exp(self.loglik[p] - m)
-                lam_m = lam * ti.exp(ti.min(-m, 80.0))
-                n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
-                for p in range(a, b):
-                    wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
-                    if self.measured(self.cell[p], src, th, w):
-                        lk = ti.exp(self.loglik[p] - m)
-                        psi = self.psi[g, self.cell[p]]
-                        mass = psi / (lam_m + psi)
-                        wt = self.weight[p] * lk / (lam_m + psi)
-                        rho = lk if on_likelihood != 0 else wt
-                    elif self.cell[p] >= 0:
-                        wt = miss * self.weight[p]
-                        rho = miss * ti.exp(self.loglik[p] - m) if on_likelihood != 0 else wt
-                    self.wtilde[p] = wt
-                    self.cellmass[p] = mass
-                    top = ti.max(top, mass)
-                    n_hat += wt
-                    cum += rho
-                    self.cdf[p] = cum
-                for p in range(a, b):
-                    if self.cell[p] >= 0:
-                        self.psi[g, self.cell[p]] = 0.0
-                self.gout[g, N_HAT] = n_hat
-                self.gout[g, TOTAL] = cum
-                self.gout[g, TOP] = top
+                self.update_group(first_group + it // span, lam, on_likelihood, th, miss)
+
+    @ti.func
+    def update_group(self, g: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32, miss: ti.f32):
+        """:meth:`update` for group g, in this thread."""
+        w = ti.static(self.shape[1])
+        a, b = self.segment(g)
+        m = ti.f32(LOG_ZERO)
+        for p in range(a, b):
+            m = ti.max(m, self.loglik[p])
+        src = self.gint[g, FRAME]
+        for p in range(a, b):
+            if self.measured(self.cell[p], src, th, w):
+                self.psi[g, self.cell[p]] += self.weight[p] * ti.exp(self.loglik[p] - m)
+        lam_m = lam * ti.exp(ti.min(-m, 80.0))
+        n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
+        for p in range(a, b):
+            wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
+            if self.measured(self.cell[p], src, th, w):
+                lk = ti.exp(self.loglik[p] - m)
+                psi = self.psi[g, self.cell[p]]
+                mass = psi / (lam_m + psi)
+                wt = self.weight[p] * lk / (lam_m + psi)
+                rho = lk if on_likelihood != 0 else wt
+            elif self.cell[p] >= 0:
+                wt = miss * self.weight[p]
+                rho = miss * ti.exp(self.loglik[p] - m) if on_likelihood != 0 else wt
+            self.wtilde[p] = wt
+            self.cellmass[p] = mass
+            top = ti.max(top, mass)
+            n_hat += wt
+            cum += rho
+            self.cdf[p] = cum
+        for p in range(a, b):
+            if self.cell[p] >= 0:
+                self.psi[g, self.cell[p]] = 0.0
+        self.gout[g, N_HAT] = n_hat
+        self.gout[g, TOTAL] = cum
+        self.gout[g, TOP] = top
+
+    @ti.func
+    def segment(self, g: ti.i32):
+        """Group g's slots [a, b)."""
+        return self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
 
     @ti.func
     def measured(self, cell: ti.i32, src: ti.i32, th: ti.f32, w: ti.template()) -> ti.i32:
@@ -265,51 +274,55 @@ class PhdKernels:
         NO_CENTRE).  Writes the class's mass Σw̃, its w̃-weighted mean and covariance and each model's w̃ share
         (Eq. 35's L_{k,r}/L_k in expectation over the resampling); a class with Σw̃ = 0 uses equal weights, an
         empty one gives mass 0 and a zero mean."""
-        w = ti.static(self.shape[1])
         span = ti.static(self.span)
         for it in range(n_groups * span):
             if it % span == 0:
-                g = first_group + it // span
-                a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
-                gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]
-                best, peak = ti.f32(-1.0), -1
-                for p in range(a, b):
-                    inside = gx <= NO_CENTRE or (ti.abs(self.state[p, 0] - gx) <= gate
-                                                 and ti.abs(self.state[p, 2] - gy) <= gate)
-                    if self.cell[p] >= 0 and inside and self.cellmass[p] > best:
-                        best, peak = self.cellmass[p], self.cell[p]
-                cx, cy = ti.cast(peak % w, ti.f32), ti.cast(peak // w, ti.f32)
-                sw, n_in = ti.f32(0.0), 0
-                for p in range(a, b):
-                    if peak >= 0 and self.near(p, cx, cy, radius):
-                        sw += self.wtilde[p]
-                        n_in += 1
-                flat = sw <= 0.0
-                norm = ti.f32(1.0) / ti.select(flat, ti.cast(ti.max(n_in, 1), ti.f32), sw)
-                mean = ti.Vector([0.0] * DIM, dt=ti.f32)
-                probs = ti.Vector([0.0] * MAX_MODELS, dt=ti.f32)
-                for p in range(a, b):
-                    if peak >= 0 and self.near(p, cx, cy, radius):
-                        wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
-                        for d in ti.static(range(DIM)):
-                            mean[d] += wp * self.state[p, d]
-                        for r in ti.static(range(MAX_MODELS)):
-                            if self.model[p] == r:
-                                probs[r] += wp
-                cov = ti.Matrix.zero(ti.f32, DIM, DIM)
-                for p in range(a, b):
-                    if peak >= 0 and self.near(p, cx, cy, radius):
-                        wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
-                        dv = ti.Vector([self.state[p, d] - mean[d] for d in ti.static(range(DIM))], dt=ti.f32)
-                        cov += wp * dv.outer_product(dv)
-                for i in ti.static(range(DIM)):
-                    self.est[g, EST_MEAN + i] = mean[i]
-                    for j in ti.static(range(DIM)):
-                        self.est[g, EST_COV + DIM * i + j] = cov[i, j]
+                self.estimate_group(first_group + it // span, radius)
+
+    @ti.func
+    def estimate_group(self, g: ti.i32, radius: ti.f32):
+        """:meth:`estimate` for group g, in this thread."""
+        w = ti.static(self.shape[1])
+        a, b = self.segment(g)
+        gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]
+        best, peak = ti.f32(-1.0), -1
+        for p in range(a, b):
+            inside = gx <= NO_CENTRE or (ti.abs(self.state[p, 0] - gx) <= gate
+                                         and ti.abs(self.state[p, 2] - gy) <= gate)
+            if self.cell[p] >= 0 and inside and self.cellmass[p] > best:
+                best, peak = self.cellmass[p], self.cell[p]
+        cx, cy = ti.cast(peak % w, ti.f32), ti.cast(peak // w, ti.f32)
+        sw, n_in = ti.f32(0.0), 0
+        for p in range(a, b):
+            if peak >= 0 and self.near(p, cx, cy, radius):
+                sw += self.wtilde[p]
+                n_in += 1
+        flat = sw <= 0.0
+        norm = ti.f32(1.0) / ti.select(flat, ti.cast(ti.max(n_in, 1), ti.f32), sw)
+        mean = ti.Vector([0.0] * DIM, dt=ti.f32)
+        probs = ti.Vector([0.0] * MAX_MODELS, dt=ti.f32)
+        for p in range(a, b):
+            if peak >= 0 and self.near(p, cx, cy, radius):
+                wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
+                for d in ti.static(range(DIM)):
+                    mean[d] += wp * self.state[p, d]
                 for r in ti.static(range(MAX_MODELS)):
-                    self.est[g, EST_PROB + r] = probs[r]
-                self.est[g, EST_MASS] = sw
-                self.est[g, EST_PEAK] = ti.max(best, 0.0)
+                    if self.model[p] == r:
+                        probs[r] += wp
+        cov = ti.Matrix.zero(ti.f32, DIM, DIM)
+        for p in range(a, b):
+            if peak >= 0 and self.near(p, cx, cy, radius):
+                wp = ti.select(flat, 1.0, self.wtilde[p]) * norm
+                dv = ti.Vector([self.state[p, d] - mean[d] for d in ti.static(range(DIM))], dt=ti.f32)
+                cov += wp * dv.outer_product(dv)
+        for i in ti.static(range(DIM)):
+            self.est[g, EST_MEAN + i] = mean[i]
+            for j in ti.static(range(DIM)):
+                self.est[g, EST_COV + DIM * i + j] = cov[i, j]
+        for r in ti.static(range(MAX_MODELS)):
+            self.est[g, EST_PROB + r] = probs[r]
+        self.est[g, EST_MASS] = sw
+        self.est[g, EST_PEAK] = ti.max(best, 0.0)
 
     @ti.func
     def near(self, p: ti.i32, cx: ti.f32, cy: ti.f32, radius: ti.f32):
