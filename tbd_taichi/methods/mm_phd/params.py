@@ -87,6 +87,9 @@ class MMPHDParams:
                                  "tracked only when its class's peak cell holds at least this PHD mass (hysteresis: "
                                  "confirmed trackers hold on down to drop_below)", source="not in the paper", low=0,
                                  high=1, low_closed=False, high_closed=False)
+    confirm_share: float = param(0.5, doc="a tentative tracker's frame counts toward confirmation only when its "
+                                 "class holds at least this share of its PHD mass n̂ (on noise the mass is spread "
+                                 "over several bright cells)", source="not in the paper", low=0, high=1)
     max_tracks: int = param(16, doc="trackers alive at once (pool size; a capture beyond it waits)",
                             source="not in the paper", low=1, high=1024)
     adaptive_q: bool = param(True, doc="adaptive process noise (Eq. 21); off: Q = Q_min", source="§3.2, Fig. 2")

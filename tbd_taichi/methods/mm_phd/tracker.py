@@ -213,12 +213,13 @@ class MMPHDTracker(OneSequence):
         if not self.targets:
             return released
         stats = [unpack(est[1 + i], len(self.d.models)) for i in range(len(self.targets))]
-        for t, e in zip(self.targets, stats):
+        for t, e, total in zip(self.targets, stats, n_hat[1:]):
             t.follow(e.mean, e.cov, e.mass, self.p.frame_interval)
             t.mass = e.peak
             if e.peak >= p.drop_below:
                 t.drops = 0
-                t.streak += t.confirmed or e.peak >= p.confirm_above  # a tentative track counts strong frames
+                # a tentative track counts strong frames: a strong peak cell holding most of its PHD mass
+                t.streak += t.confirmed or (e.peak >= p.confirm_above and e.mass >= p.confirm_share * total)
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
                 if t.confirmed:
                     released.append(t.rows[-1])
