@@ -246,8 +246,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.set_defaults(func=cmd_simulate, check=check_simulate)
 
     ev = sub.add_parser("evaluate", help="score a tracks CSV against a truth CSV",
-                        description="Point truth: mean EDT (Eq. 47), DSR (Eq. 48), false tracks and OSPA. Box truth: "
-                                    "detection rate, false points per frame, centre error and IoU.")
+                        description="Point truth: mean EDT (Eq. 47), DSR (Eq. 48), false tracks, OSPA and Long et "
+                                    "al. 2012's track detection (5 px): mean |cardinality error| per frame, P_TD, "
+                                    "detection and halt frames (0-based). Box truth: detection rate, false points "
+                                    "per frame, centre error and IoU.")
     ev.add_argument("--tracks", required=True, help="tracks CSV: frame,track_id,x,y,vx,vy,intensity,confidence")
     ev.add_argument("--truth", required=True, help="truth CSV: points (frame,target_id,x,y,...) or boxes "
                     "(frame,x,y,w,h[,target_id]; x, y = the top-left corner)")
@@ -255,8 +257,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--ospa-c", type=number(positive), default=metrics.OSPA_C, help="OSPA cut-off c, px (default 5)")
     ev.add_argument("--ospa-p", type=number(positive, 1.0, True), default=metrics.OSPA_P, help="OSPA order p ≥ 1 (default 2)")
     ev.add_argument("--frames", type=number(whole, 1), default=None,
-                    help="sequence length for the OSPA average (default: last frame in either file + 1)")
-    ev.add_argument("--json", action="store_true", help="print one JSON object (keys dsr, edt_mean, false_tracks, ospa)")
+                    help="sequence length for the OSPA and cardinality-error averages (default: last frame in "
+                         "either file + 1)")
+    ev.add_argument("--json", action="store_true", help="print one JSON object (point truth: keys dsr, edt_mean, "
+                    "false_tracks, ospa, cardinality_error, p_td, detection_frame, halt_frame)")
     ev.add_argument("--box-margin", type=number(positive, 0.0, True), default=metrics.BOX_MARGIN,
                     help="with box truth: a hit is a track point inside the box grown by this, px (default 2)")
     _common(ev)

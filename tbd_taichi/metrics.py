@@ -249,20 +249,26 @@ def box_iou(box, track) -> float:
 def truth_scores(kind: str, tracks: np.ndarray, truth: np.ndarray, n_frames: int | None = None, *,
                  box_margin: float = BOX_MARGIN, t0: float = T0, ospa_c: float = OSPA_C,
                  ospa_p: float = OSPA_P) -> dict:
-    """The report against truth of ``kind`` (:func:`~tbd_taichi.tables.read_any_truth`), with its settings:
-    ``points``, :func:`evaluate`; ``boxes``, :func:`box_scores` over ``n_frames`` frames (default: the last frame
-    in either table + 1)."""
+    """The report against truth of ``kind`` (:func:`~tbd_taichi.tables.read_any_truth`), with its settings, over
+    ``n_frames`` frames (default: the last frame in either table + 1): ``boxes``, :func:`box_scores`; ``points``,
+    :func:`evaluate` and Long et al.'s track-detection measures (:mod:`~tbd_taichi.track_detection`, 5 px gate):
+    ``cardinality_error`` (mean |tracks − targets| per frame), ``p_td`` (fraction of targets detected) and per
+    target id the 0-based ``detection_frame`` and ``halt_frame`` of its track (None: not detected)."""
+    frames = n_frames if n_frames is not None else \
+        int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
     if kind == "boxes":
-        if n_frames is None:
-            n_frames = int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
-        return dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, n_frames, grow=box_margin))
+        return dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, frames, grow=box_margin))
     from .track_detection import track_detection
 
     scores = evaluate(tracks, truth, t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, n_frames=n_frames)
-    frames = n_frames if n_frames is not None else \
-        int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
     long = track_detection(tracks, truth, frames)
     scores.update(truth="points", t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, cardinality_error=long["cardinality_error"],
-                  p_td=long["p_td"], detection_frame={t: e["detection_frame"] for t, e in long["targets"].items()},
-                  halt_frame={t: e["halt_frame"] for t, e in long["targets"].items()})
+                  p_td=long["p_td"], detection_frame=_detected(long["targets"], "detection_frame"),
+                  halt_frame=_detected(long["targets"], "halt_frame"))
     return scores
+
+
+def _detected(targets: dict, key: str) -> dict:
+    """{target id as text: ``key`` of a :func:`~tbd_taichi.track_detection.track_detection` target entry, or None
+    where the target was not detected}."""
+    return {str(t): e[key] if e["detected"] else None for t, e in targets.items()}

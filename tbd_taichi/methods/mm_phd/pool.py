@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ... import backend
 from ...engines import kernel_module
 from ...kernels.phd import (CX, CY, FRAME, GROUP_FLOAT, GROUP_INT, LENGTH, NO_CENTRE, OUT_ID, OUT_LEN,
                              N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
@@ -12,7 +13,6 @@ from .params import P_DETECT, Derived, MMPHDParams
 
 MAX_MODELS = 4
 EVERY_CELL = 1.0e30  # −threshold that makes every cell a measurement
-_SPARE: dict[tuple, list] = {}  # finished pools' kernels by (engine, capacity, groups, shape), for reuse
 
 
 def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
@@ -38,10 +38,12 @@ class PhdPool:
 
     def __init__(self, shape, p: MMPHDParams, d: Derived, capacity: int, max_groups: int, seed: int,
                  engine: str, arch: str | None):
-        self.key = (engine, int(capacity), int(max_groups), tuple(int(v) for v in shape))
-        spare = _SPARE.get(self.key)
-        self.k = spare.pop() if spare else \
-            kernel_module(engine, "phd", arch).PhdKernels(capacity, max_groups, shape)
+        module = kernel_module(engine, "phd", arch)
+        dims = (int(capacity), int(max_groups), tuple(int(v) for v in shape))
+        # Taichi compiles a data-oriented object's kernels once per object: a new pool takes the fields of a
+        # finished one of the same size (backend.reusable); the NumPy twin has nothing to compile
+        self.k = module.PhdKernels(*dims) if engine == "numpy" else \
+            backend.reusable(self, ("phd",) + dims, lambda: module.PhdKernels(*dims))
         self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
@@ -53,13 +55,6 @@ class PhdPool:
         self.n_groups = 0
         self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
         self.no_centre = np.full((1, 2), -1.0e6, np.float32)
-
-    def release(self) -> None:
-        """Hand the kernels' fields back for the next pool of the same size (Taichi compiles a data-oriented
-        object's kernels once per object, so a new tracker reuses a finished one's); the pool is spent."""
-        if self.k is not None:
-            _SPARE.setdefault(self.key, []).append(self.k)
-            self.k = None
 
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,

@@ -176,9 +176,6 @@ class MMPHDTracker(OneSequence):
             raise InputError(f"{self.frames_in} frame(s), but MM-PHD needs at least {MIN_FRAMES} frames "
                              f"(a track is confirmed after {self.p.confirm_frames} tracked frames)")
         self._close_sequence()
-        self.pool.release()
-        if self._backward is not None:
-            self._backward.pool.release()
         rows = [] if not self.history else self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
         return self._table(rows)
 
