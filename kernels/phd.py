@@ -63,13 +63,6 @@ def erf(x: ti.f32) -> ti.f32:
     return ti.select(x < 0, -y, y)
 
 
-@ti.func
-def pixel_fraction(centre: ti.f32, pos: ti.f32, scale: ti.f32) -> ti.f32:
-    """Eq. 4 along one axis: the share of a unit Gaussian (σ = Σ, mean ``pos``) over the pixel [centre − ½,
-    centre + ½], ½[erf((c + ½ − pos)/(√2Σ)) − erf((c − ½ − pos)/(√2Σ))]; ``scale`` = 1/(√2Σ)."""
-    return ti.f32(0.5) * (erf((centre + ti.f32(0.5) - pos) * scale) - erf((centre - ti.f32(0.5) - pos) * scale))
-
-
 @ti.data_oriented
 class PhdKernels:
     """The pool's fields (``capacity`` slots, ``max_groups`` groups, frames of ``shape``) and its steps."""
@@ -158,7 +151,7 @@ class PhdKernels:
         """Slots [first, first + count): the most influenced cell (row·W + col of the pixel holding (x, y), Eq. 17;
         −1 outside the image) and log ℓ = Σ_window h(z − h/2) (Eq. 13 with σ_n = 1 on the normalised frame) over
         |col − col0|, |row − row0| ≤ ``half`` = ⌊3Σ⌋ (Eq. 18), pixels outside the image left out; h is Eq. 4's
-        pixel integral, h = I·fx·fy (:func:`pixel_fraction`)."""
+        pixel integral, h = I·fx·fy (:meth:`fractions`)."""
         h, w = ti.static(self.shape)
         scale = ti.f32(SQRT_HALF) / psf_sigma
         for p in range(first, first + count):
@@ -188,7 +181,8 @@ class PhdKernels:
     @ti.func
     def fractions(self, centre: ti.i32, pos: ti.f32, scale: ti.f32, half: ti.template()):
         """Eq. 4 along one axis for the 2·half + 1 pixels around ``centre``: ½[erf(edge_{k+1}) − erf(edge_k)] from
-        the 2·half + 2 pixel edges' erf (each edge shared by two pixels, as :func:`pixel_fraction` per pixel)."""
+        the 2·half + 2 pixel edges' erf (each edge shared by two pixels; the twin's ``pixel_fraction`` takes the
+        two per pixel)."""
         e = ti.Vector([erf((ti.cast(centre + k, ti.f32) - 0.5 - pos) * scale)
                        for k in ti.static(range(-half, half + 2))], dt=ti.f32)
         return ti.Vector([0.5 * (e[k + 1] - e[k]) for k in ti.static(range(2 * half + 1))], dt=ti.f32)

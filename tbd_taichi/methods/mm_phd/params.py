@@ -9,6 +9,7 @@ import numpy as np
 from scipy.stats import norm
 
 from ...errors import ParameterError
+from ...long2012 import intensity_for_db
 from ...motion_models import check_models
 from ..registry import param, validate_params
 
@@ -149,11 +150,6 @@ def default_switch(n: int) -> str:
 def default_birth_models(n: int) -> str:
     """β for ``n`` models: §5.2's (0.8, 0.1, 0.1) pattern, 0.8 for the first and the rest shared (1 for one)."""
     return "1" if n == 1 else ",".join(f"{0.8 if j == 0 else 0.2 / (n - 1):.12g}" for j in range(n))
-
-
-def intensity_for_db(snr_db: float, psf_sigma: float, noise_sigma: float = 1.0) -> float:
-    """Eq. 37: I = 2π·σ_n·Σ²·10^(SNR/20), the total intensity of a target of peak SNR ``snr_db`` (Eq. 5)."""
-    return 2.0 * math.pi * noise_sigma * psf_sigma ** 2 * 10.0 ** (snr_db / 20.0)
 
 
 def derived(p: MMPHDParams) -> Derived:

@@ -22,7 +22,7 @@ from ...background import DEFAULT_BACKGROUND, Preprocessor
 from ...errors import InputError
 from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
-from ...tables import TRACK_COLUMNS
+from ...tables import TRACK_COLUMNS, _dtype
 from ..registry import OneSequence
 from .backward import BackwardRecursion
 from .estimation import Capture, adapted_scale, captures, live_dims, log_det, unpack
@@ -40,7 +40,8 @@ def track_columns(models) -> tuple[str, ...]:
 
 
 def track_dtype(models) -> np.dtype:
-    return np.dtype([(c, np.int64 if c in ("frame", "track_id") else np.float64) for c in track_columns(models)])
+    """The tracks table's dtype for :func:`track_columns` (the tables module's types)."""
+    return _dtype(track_columns(models))
 
 
 @dataclass
