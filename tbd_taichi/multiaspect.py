@@ -26,6 +26,10 @@ PAPER_G = np.array([[0.6, 0.4, 0.0, 0.0],
 NEIGHBOUR_SHARE = 0.4
 MAX_TEMPLATE_SIDE = 63  # px: a template larger than this is no "small" target (and the kernels loop over it)
 MOTION_FORMS = ("continuous", "discrete")
+# §4's initial law in project coordinates (the paper's x ~ U[50, 70] is the row): column U[10, 20] px,
+# row U[50, 70] px, each velocity N(2, 0.1²) px/frame (10 m/s at ζ = 0.2 m/px, T = 0.04 s), aspect uniform
+PAPER_PRIOR = {"x": (10.0, 20.0), "y": (50.0, 70.0), "v_mean": 2.0, "v_sd": 0.1}
+PAPER_Q, PAPER_T, PAPER_ZETA = 6.0, 0.04, 0.2  # §4: q (m²/s³), frame interval (s), resolution (m/px)
 
 
 def aspect_transition(k: int) -> np.ndarray:
