@@ -1,0 +1,306 @@
+"""Multiaspect track-before-detect kernels (Bruno, Araújo & Pavlov 2008): one pool of G filters (groups) of N
+particles each, slot p in group p // N; every step is one launch for all groups.
+
+A particle is (x, ẋ, y, ẏ) in px and px/frame (x = column) and an aspect z ∈ {0, 1..K}, 0 = absent.  Buffers:
+``prev`` (the particles at n − 1), ``prop`` (draws from the prior and their log-likelihood ratios), ``cur`` (the
+particles at n); ``pick`` holds resampled indices, ``anc`` each particle's ancestor in ``prev``.
+
+Steps (the paper's equations):
+
+* :meth:`MultiaspectKernels.dmap`: d = A·y, the 5-point stencil of Eq. 16 with zero boundary, per group;
+* :meth:`MultiaspectKernels.propagate`: (z, s) ~ Eq. 2 (aspect by G, Eq. 1; exit with 1 − P_in, Eq. 6 in closed
+  form; entry with p_a, uniform aspect, s ~ f₀, Eq. 5) and Eq. 4's white-noise acceleration, from ``prev[p]`` or
+  from the ancestor ``prev[anc[p]]``;
+* :meth:`MultiaspectKernels.likelihood`: ℓ = (2λ − ρ)/(2σ_c²) (Eq. 10 over the absent hypothesis), λ by Eq. 15,
+  ρ = E₀ − 2β_h·C_h − 2β_v·C_v from the border-aware tables (Eq. 12), 0 for z = 0 or off the extended grid;
+* :meth:`MultiaspectKernels.weigh` / :meth:`draw` / :meth:`gather`: weights ∝ e^ℓ (Eqs. 18, 23) or the second
+  stage's ∝ e^(ℓ − ℓ̂) (Eq. 24), cumulated per group in f64, multinomial draws by binary search, the gather;
+* :meth:`MultiaspectKernels.mh_move`: the resample-move step (Eqs. 19–21);
+* :meth:`MultiaspectKernels.summarize`: per group, the absent count, the present particles' sums and each
+  aspect's count (§3.4).
+
+Sums within a group run serially in one thread (groups in parallel), so results do not depend on the thread
+count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
+``tbd_taichi.numpy_kernels.multiaspect``."""
+import numpy as np
+import taichi as ti
+
+from .loops import thread_span
+from .phd import SQRT_HALF, erf
+from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
+
+STATE = 4  # x, ẋ, y, ẏ
+S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
+S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
+STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
+STAGE_BASE = 1000
+S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
+S_MOVE = 200  # the MH acceptance uniforms: S_MOVE + the sweep (< 100)
+S_PRIOR = 300  # the initial draw: 300…307
+LAW = ("x0", "x1", "y0", "y1", "v_mean", "v_sd", "v_spread")  # f₀ and the prior: U[x0, x1] × U[y0, y1], velocity
+# per axis v_mean + v_sd·n + v_spread·(2u − 1)
+GPAR = ("beta_h", "beta_v", "sigma_c2")
+SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # columns of gsum; aspects from SUM_ASPECT
+_NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
+
+
+@ti.data_oriented
+class MultiaspectKernels:
+    """Fields of ``groups`` filters of ``n`` particles for frames of ``shape`` and the (K, h, w) templates."""
+
+    def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
+        self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
+        self.k, th, tw = (int(v) for v in template_shape)
+        self.halves = ((th - 1) // 2, (tw - 1) // 2)
+        c, g, (h, w) = self.groups * self.n, self.groups, self.shape
+        self.capacity = c
+        self.prev, self.prop, self.cur = (ti.field(ti.f32, (c, STATE)) for _ in range(3))
+        self.prev_z, self.prop_z, self.cur_z = (ti.field(ti.i32, c) for _ in range(3))
+        self.prop_ll, self.cur_ll = ti.field(ti.f32, c), ti.field(ti.f32, c)
+        self.pick, self.anc = ti.field(ti.i32, c), ti.field(ti.i32, c)
+        self.cdf = ti.field(ti.f64, c)
+        self.total = ti.field(ti.f64, g)
+        self.frame = ti.field(ti.f32, (g, h, w))
+        self.d = ti.field(ti.f32, (g, h, w))
+        self.gpar = ti.field(ti.f32, (g, len(GPAR)))
+        self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))
+        self.templates = ti.field(ti.f32, (self.k, th, tw))
+        self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
+        self.gcdf = ti.field(ti.f32, (self.k, self.k))  # gcdf[j, i] = Σ_{i' ≤ i} G(i', j): column j's cumulative
+        self.tables = NormalTables()
+        self.span = thread_span(serial)
+
+    # ------------------------------------------------------------------ Eq. 16
+
+    @ti.kernel
+    def dmap(self):
+        """d[g] = A·y[g]: y − β_h·(left + right) − β_v·(up + down), y = 0 outside the image (Eq. 16)."""
+        h, w = ti.static(self.shape)
+        for g, r, c in self.frame:
+            bh, bv = self.gpar[g, 0], self.gpar[g, 1]
+            left = self.frame[g, r, c - 1] if c > 0 else 0.0
+            right = self.frame[g, r, c + 1] if c < w - 1 else 0.0
+            up = self.frame[g, r - 1, c] if r > 0 else 0.0
+            down = self.frame[g, r + 1, c] if r < h - 1 else 0.0
+            self.d[g, r, c] = self.frame[g, r, c] - bh * (left + right) - bv * (up + down)
+
+    # ------------------------------------------------------------------ Eqs. 1–6
+
+    @ti.kernel
+    def init_prior(self, seed: ti.u32, p_absent: ti.f32, law: ti.types.vector(7, ti.f32)):
+        """prev ← the prior: z = 0 with probability ``p_absent``, else uniform on 1..K; s ~ ``law`` (LAW)."""
+        k_abs = key_prefix(seed, 0, S_PRIOR)
+        k_asp = key_prefix(seed, 0, S_PRIOR + 1)
+        for p in range(self.capacity):
+            s = self.law_draw(seed, 0, S_PRIOR + 2, p, law)
+            for i in ti.static(range(STATE)):
+                self.prev[p, i] = s[i]
+            z = 0
+            if uniform_at(k_abs, p) >= p_absent:
+                z = 1 + ti.min(ti.cast(uniform_at(k_asp, p) * self.k, ti.i32), self.k - 1)
+            self.prev_z[p] = z
+
+    @ti.func
+    def law_draw(self, seed: ti.u32, frame: ti.i32, stream: ti.i32, p: ti.i32, law):
+        """(x, ẋ, y, ẏ) ~ ``law``: x ~ U[x0, x1], y ~ U[y0, y1], each velocity v_mean + v_sd·n + v_spread·(2u − 1)."""
+        ux = uniform_at(key_prefix(seed, frame, stream), p)
+        uy = uniform_at(key_prefix(seed, frame, stream + 1), p)
+        nvx = normal_at(self.tables.w, self.tables.k, self.tables.phi, key_prefix(seed, frame, stream + 2), p)
+        nvy = normal_at(self.tables.w, self.tables.k, self.tables.phi, key_prefix(seed, frame, stream + 3), p)
+        uvx = uniform_at(key_prefix(seed, frame, stream + 4), p)
+        uvy = uniform_at(key_prefix(seed, frame, stream + 5), p)
+        return ti.Vector([law[0] + (law[1] - law[0]) * ux, law[4] + law[5] * nvx + law[6] * (2.0 * uvx - 1.0),
+                          law[2] + (law[3] - law[2]) * uy, law[4] + law[5] * nvy + law[6] * (2.0 * uvy - 1.0)],
+                         dt=ti.f32)
+
+    @ti.kernel
+    def propagate(self, seed: ti.u32, frame: ti.i32, stage: ti.i32, from_ancestor: ti.i32, coupled: ti.i32,
+                  p_a: ti.f32, motion: ti.types.vector(3, ti.f32), law: ti.types.vector(7, ti.f32)):
+        """prop[p] ~ p(s, z | prev[q]) with q = anc[p] if ``from_ancestor`` else p (Eqs. 2, 4, 5).  ``motion`` =
+        (a, b, c), the Cholesky factor of one axis' Q (w = (a·n₁, b·n₁ + c·n₂)); P_in by Eq. 6 in closed form with
+        the position sd a; ``coupled``: exit iff the drawn s leaves the extended grid instead (same z law)."""
+        base = STAGE_BASE + STAGE_STREAMS * stage
+        k_exit, k_asp = key_prefix(seed, frame, base + S_EXIT), key_prefix(seed, frame, base + S_ASPECT)
+        k_enter = key_prefix(seed, frame, base + S_ENTER)
+        kn = [key_prefix(seed, frame, base + S_NOISE + i) for i in ti.static(range(4))]
+        for p in range(self.capacity):
+            q = self.anc[p] if from_ancestor != 0 else p
+            z = self.prev_z[q]
+            x, vx, y, vy = self.prev[q, 0], self.prev[q, 1], self.prev[q, 2], self.prev[q, 3]
+            n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, kn[i], p)
+                           for i in ti.static(range(4))], dt=ti.f32)
+            moved = ti.Vector([x + vx + motion[0] * n[0], vx + motion[1] * n[0] + motion[2] * n[1],
+                               y + vy + motion[0] * n[2], vy + motion[1] * n[2] + motion[2] * n[3]], dt=ti.f32)
+            u_exit, u_asp = uniform_at(k_exit, p), uniform_at(k_asp, p)
+            new_z = 0
+            if z != 0:
+                stays = self.on_grid(moved[0], moved[2])
+                if coupled == 0:
+                    stays = u_exit < self.p_inside(x + vx, y + vy, motion[0])
+                if stays:
+                    new_z = self.next_aspect(z, u_asp)
+            elif uniform_at(k_enter, p) < p_a:
+                new_z = 1 + ti.min(ti.cast(u_asp * self.k, ti.i32), self.k - 1)
+                moved = self.law_draw(seed, frame, base + S_F0, p, law)
+            for i in ti.static(range(STATE)):
+                self.prop[p, i] = moved[i]
+            self.prop_z[p] = new_z
+
+    @ti.func
+    def next_aspect(self, z: ti.i32, u: ti.f32) -> ti.i32:
+        """Aspect i ~ G(·, z) (Eq. 1): the first i with gcdf[z − 1, i − 1] > u."""
+        out = self.k
+        for i in range(self.k):
+            if out == self.k and u < self.gcdf[z - 1, i]:
+                out = i + 1
+        return out
+
+    @ti.func
+    def on_grid(self, x: ti.f32, y: ti.f32) -> ti.i32:
+        """Whether the quantised centroid (Eq. 3) of (x, y) lies on the extended grid."""
+        h, w = ti.static(self.shape)
+        hh, hw = ti.static(self.halves)
+        c = ti.cast(ti.floor(x + 0.5), ti.i32)
+        r = ti.cast(ti.floor(y + 0.5), ti.i32)
+        return -hw <= c < w + hw and -hh <= r < h + hh
+
+    @ti.func
+    def p_inside(self, mx: ti.f32, my: ti.f32, sd: ti.f32) -> ti.f32:
+        """P_in of Eq. 6 (notes A1): Φ-differences of the extended grid's edges around the predicted (mx, my)."""
+        h, w = ti.static(self.shape)
+        hh, hw = ti.static(self.halves)
+        s = ti.f32(SQRT_HALF) / ti.max(sd, 1e-12)
+        px = 0.5 * (erf((w - 0.5 + hw - mx) * s) - erf((-hw - 0.5 - mx) * s))
+        py = 0.5 * (erf((h - 0.5 + hh - my) * s) - erf((-hh - 0.5 - my) * s))
+        return px * py
+
+    # ------------------------------------------------------------------ Eqs. 10–15
+
+    @ti.kernel
+    def likelihood(self):
+        """prop_ll[p] = (2λ − ρ)/(2σ_c²) for a present particle on the extended grid, else 0 (Eqs. 10, 12, 15)."""
+        h, w = ti.static(self.shape)
+        hh, hw = ti.static(self.halves)
+        for p in range(self.capacity):
+            z = self.prop_z[p]
+            out = ti.f32(0.0)
+            if z != 0 and self.on_grid(self.prop[p, 0], self.prop[p, 2]):
+                g = p // self.n
+                c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
+                r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
+                lam = ti.f32(0.0)
+                for a in range(ti.max(0, hh - r), ti.min(2 * hh + 1, h + hh - r)):
+                    for b in range(ti.max(0, hw - c), ti.min(2 * hw + 1, w + hw - c)):
+                        lam += self.templates[z - 1, a, b] * self.d[g, r + a - hh, c + b - hw]
+                e0 = self.energy[0, z - 1, r + hh, c + hw]
+                rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
+                    - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
+                out = (2.0 * lam - rho) / (2.0 * self.gpar[g, 2])
+            self.prop_ll[p] = out
+
+    # ------------------------------------------------------------------ Eqs. 18, 23, 24: weights and resampling
+
+    @ti.kernel
+    def weigh(self, second_stage: ti.i32):
+        """Per group, in one thread: cdf = cumulative e^(v − max v) in f64 with v = prop_ll (Eqs. 18, 23) or, for the
+        APF's second stage, prop_ll − cur_ll (Eq. 24: cur_ll holds the first stage's ℓ̂ of the particle's
+        auxiliary index); total[g] = its last value."""
+        span = ti.static(self.span)
+        for it in range(self.groups * span):
+            if it % span == 0:
+                g = it // span
+                a, b = g * self.n, (g + 1) * self.n
+                m = ti.f32(-3.0e38)
+                for p in range(a, b):
+                    m = ti.max(m, self.log_weight(p, second_stage))
+                cum = ti.f64(0.0)
+                for p in range(a, b):
+                    cum += ti.exp(ti.cast(self.log_weight(p, second_stage) - m, ti.f64))
+                    self.cdf[p] = cum
+                self.total[g] = cum
+
+    @ti.func
+    def log_weight(self, p: ti.i32, second_stage: ti.i32) -> ti.f32:
+        return self.prop_ll[p] - self.cur_ll[p] if second_stage != 0 else self.prop_ll[p]
+
+    @ti.kernel
+    def draw(self, seed: ti.u32, frame: ti.i32, number: ti.i32):
+        """pick[j] ~ Categorical(cdf of j's group): multinomial resampling, a uniform per particle and a binary
+        search in the group's cumulative weights."""
+        key = key_prefix(seed, frame, S_DRAW + number)
+        for j in range(self.capacity):
+            g = j // self.n
+            target = uniform_f64_at(key, j) * self.total[g]
+            lo, hi = g * self.n, (g + 1) * self.n - 1
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if self.cdf[mid] > target:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            self.pick[j] = lo
+
+    @ti.kernel
+    def gather(self):
+        """cur[j] ← prop[pick[j]] with its ℓ; anc[j] ← pick[j] (the particle's ancestor in prev)."""
+        for j in range(self.capacity):
+            i = self.pick[j]
+            for d in ti.static(range(STATE)):
+                self.cur[j, d] = self.prop[i, d]
+            self.cur_z[j] = self.prop_z[i]
+            self.cur_ll[j] = self.prop_ll[i]
+            self.anc[j] = i
+
+    # ------------------------------------------------------------------ Eqs. 19–21
+
+    @ti.kernel
+    def mh_move(self, seed: ti.u32, frame: ti.i32, sweep: ti.i32):
+        """Accept prop[j] (drawn from the prior at the ancestor's n − 1 state) for cur[j] if u ≤ e^(ℓ̃ − ℓ)
+        (Eq. 19: the prior cancels in the independence sampler's ratio), else keep cur[j] (Eqs. 20–21)."""
+        key = key_prefix(seed, frame, S_MOVE + sweep)
+        for j in range(self.capacity):
+            if ti.log(uniform_at(key, j)) <= self.prop_ll[j] - self.cur_ll[j]:
+                for d in ti.static(range(STATE)):
+                    self.cur[j, d] = self.prop[j, d]
+                self.cur_z[j] = self.prop_z[j]
+                self.cur_ll[j] = self.prop_ll[j]
+
+    @ti.kernel
+    def commit(self):
+        """prev ← cur: the particles at n become the next frame's n − 1."""
+        for j in range(self.capacity):
+            for d in ti.static(range(STATE)):
+                self.prev[j, d] = self.cur[j, d]
+            self.prev_z[j] = self.cur_z[j]
+
+    # ------------------------------------------------------------------ §3.4
+
+    @ti.kernel
+    def summarize(self):
+        """gsum[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per group in
+        one thread (f64, slot order)."""
+        span = ti.static(self.span)
+        for it in range(self.groups * span):
+            if it % span == 0:
+                g = it // span
+                for col in range(SUM_ASPECT + self.k):
+                    self.gsum[g, col] = 0.0
+                for p in range(g * self.n, (g + 1) * self.n):
+                    z = self.prev_z[p]
+                    if z == 0:
+                        self.gsum[g, SUM_ABSENT] += 1.0
+                    else:
+                        for d in ti.static(range(STATE)):
+                            self.gsum[g, SUM_X + d] += ti.cast(self.prev[p, d], ti.f64)
+                        self.gsum[g, SUM_ASPECT + z - 1] += 1.0
+
+    # ------------------------------------------------------------------ host transfers
+
+    def put(self, name: str, values) -> None:
+        """Field ``name`` ← ``values`` (its whole shape)."""
+        field = getattr(self, name)
+        field.from_numpy(np.ascontiguousarray(values, dtype=_NP[field.dtype]).reshape(field.shape))
+
+    def get(self, name: str) -> np.ndarray:
+        """A copy of field ``name``."""
+        return getattr(self, name).to_numpy()

@@ -1,0 +1,102 @@
+"""The host side of the multiaspect filters: one pool of G groups (filters) of N particles (``kernels.multiaspect``
+or its NumPy twin) and the launch order of one frame for the resample-move (§3.2) and auxiliary (§3.3) filters.
+It keeps no per-particle state itself."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ... import backend
+from ...engines import kernel_module
+from ...kernels.multiaspect import STATE, SUM_ABSENT, SUM_ASPECT, SUM_X
+from ...multiaspect import energy_tables
+
+FILTERS = ("rs", "apf")
+
+
+@dataclass(frozen=True)
+class Presence:
+    """One group's §3.4 output: P̂(z = 0), the mean (x, ẋ, y, ẏ) of the present particles (NaN if none) and the
+    count of each aspect among them."""
+
+    p_absent: float
+    mean: np.ndarray
+    aspect_counts: np.ndarray
+
+    @property
+    def present(self) -> bool:
+        """Eq. 26: decide H₁ (present) iff P̂(z = 0 | y) < ½."""
+        return self.p_absent < 0.5
+
+    @property
+    def aspect(self) -> int:
+        """The most frequent aspect (1..K) among the present particles (the lowest on a tie)."""
+        return int(np.argmax(self.aspect_counts)) + 1
+
+
+class MultiaspectPool:
+    """``groups`` filters of ``n`` particles for frames of ``shape``, templates (K, h, w) and G, on ``engine``."""
+
+    def __init__(self, shape, templates: np.ndarray, G: np.ndarray, groups: int, n: int, seed: int, engine: str,
+                 arch: str | None = None):
+        module = kernel_module(engine, "multiaspect", arch)
+        dims = (int(groups), int(n), tuple(int(v) for v in shape), tuple(templates.shape))
+        # Taichi compiles a data-oriented object's kernels once per object: reuse a finished pool's of these sizes
+        self.k = module.MultiaspectKernels(*dims) if engine == "numpy" else \
+            backend.reusable(self, ("multiaspect",) + dims, lambda: module.MultiaspectKernels(*dims))
+        self.groups, self.n, self.shape, self.seed = int(groups), int(n), tuple(shape), int(seed)
+        self.k.put("templates", templates)
+        self.k.put("energy", energy_tables(templates, shape))
+        cdf = np.cumsum(G, axis=0).T.copy()  # row j: column j of G, cumulated
+        cdf[:, -1] = 1.0
+        self.k.put("gcdf", cdf)
+
+    def start(self, p_absent: float, law: np.ndarray) -> None:
+        """Every particle drawn from the prior (z = 0 with probability ``p_absent``; s ~ ``law``)."""
+        self.k.init_prior(self.seed, float(p_absent), law)
+
+    def set_frames(self, y: np.ndarray, gmrf: np.ndarray) -> None:
+        """The mean-removed frames (G, H, W) and their (β_h, β_v, σ_c²) rows (G, 3); computes d (Eq. 16)."""
+        self.k.put("frame", y)
+        self.k.put("gpar", gmrf)
+        self.k.dmap()
+
+    def step(self, kind: str, frame: int, p_a: float, motion, law, coupled: bool, moves: int = 1) -> None:
+        """One frame of filter ``kind``: rs (§3.2: prior draw, Eq. 18's weights, multinomial resampling, ``moves``
+        MH moves from the ancestor's n − 1 state, Eqs. 19–21) or apf (§3.3: a prior draw per particle, Eq. 23's
+        first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection)."""
+        k, seed, c = self.k, self.seed, int(coupled)
+        motion = np.asarray(motion, np.float32)
+        k.propagate(seed, frame, 0, 0, c, p_a, motion, law)
+        k.likelihood()
+        k.weigh(0)
+        k.draw(seed, frame, 0)
+        k.gather()
+        if kind == "rs":
+            for sweep in range(moves):
+                k.propagate(seed, frame, 1 + sweep, 1, c, p_a, motion, law)
+                k.likelihood()
+                k.mh_move(seed, frame, sweep)
+        else:
+            k.propagate(seed, frame, 1, 1, c, p_a, motion, law)
+            k.likelihood()
+            k.weigh(1)
+            k.draw(seed, frame, 1)
+            k.gather()
+        k.commit()
+
+    def presence(self) -> list[Presence]:
+        """Each group's §3.4 output for the particles just committed."""
+        self.k.summarize()
+        sums = self.k.get("gsum")
+        out = []
+        for row in sums:
+            present = self.n - row[SUM_ABSENT]
+            mean = row[SUM_X:SUM_X + STATE] / present if present > 0 else np.full(STATE, np.nan)
+            out.append(Presence(float(row[SUM_ABSENT] / self.n), mean, row[SUM_ASPECT:].copy()))
+        return out
+
+    def particles(self) -> dict:
+        """Copies of the committed particles: state (C, 4) and aspect (C,)."""
+        return {"state": self.k.get("prev"), "aspect": self.k.get("prev_z")}

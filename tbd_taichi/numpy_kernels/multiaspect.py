@@ -1,0 +1,174 @@
+"""NumPy twin of ``tbd_taichi.kernels.multiaspect``: the same fields (as arrays), steps and contracts, vectorised
+over the particles; sums within a group run in slot order (cumulative sums) as the kernels' do."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.multiaspect import (GPAR, S_ASPECT, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
+                                   STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
+from ..kernels.phd import SQRT_HALF
+from .phd import erf
+from .rng import normal, uniform, uniform_f64
+
+F32 = np.float32
+
+
+class MultiaspectKernels:
+    """The pool of ``kernels.multiaspect.MultiaspectKernels`` as arrays, with the same steps."""
+
+    def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
+        self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
+        self.k, th, tw = (int(v) for v in template_shape)
+        self.halves = ((th - 1) // 2, (tw - 1) // 2)
+        c, g, (h, w) = self.groups * self.n, self.groups, self.shape
+        self.capacity = c
+        self.prev, self.prop, self.cur = (np.zeros((c, STATE), F32) for _ in range(3))
+        self.prev_z, self.prop_z, self.cur_z = (np.zeros(c, np.int32) for _ in range(3))
+        self.prop_ll, self.cur_ll = np.zeros(c, F32), np.zeros(c, F32)
+        self.pick, self.anc = np.zeros(c, np.int32), np.zeros(c, np.int32)
+        self.cdf, self.total = np.zeros(c), np.zeros(g)
+        self.frame, self.d = np.zeros((g, h, w), F32), np.zeros((g, h, w), F32)
+        self.gpar = np.zeros((g, len(GPAR)), F32)
+        self.gsum = np.zeros((g, SUM_ASPECT + self.k))
+        self.templates = np.zeros((self.k, th, tw), F32)
+        self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)
+        self.gcdf = np.zeros((self.k, self.k), F32)
+        self._slots = np.arange(c)
+
+    def put(self, name: str, values) -> None:
+        """Array ``name`` ← ``values`` (its whole shape)."""
+        target = getattr(self, name)
+        target[...] = np.asarray(values).reshape(target.shape)
+
+    def get(self, name: str) -> np.ndarray:
+        """A copy of array ``name``."""
+        return getattr(self, name).copy()
+
+    def dmap(self) -> None:
+        """d = A·y per group (Eq. 16), y = 0 outside the image."""
+        bh, bv = self.gpar[:, 0, None, None], self.gpar[:, 1, None, None]
+        y = np.pad(self.frame, ((0, 0), (1, 1), (1, 1)))
+        self.d[...] = y[:, 1:-1, 1:-1] - bh * (y[:, 1:-1, :-2] + y[:, 1:-1, 2:]) - bv * (y[:, :-2, 1:-1] + y[:, 2:, 1:-1])
+
+    def _law_draw(self, seed: int, frame: int, stream: int, p: np.ndarray, law) -> np.ndarray:
+        law = np.asarray(law, F32)
+        ux, uy = uniform(seed, frame, stream, p), uniform(seed, frame, stream + 1, p)
+        nvx, nvy = normal(seed, frame, stream + 2, p), normal(seed, frame, stream + 3, p)
+        uvx, uvy = uniform(seed, frame, stream + 4, p), uniform(seed, frame, stream + 5, p)
+        two, one = F32(2.0), F32(1.0)
+        return np.stack([law[0] + (law[1] - law[0]) * ux, law[4] + law[5] * nvx + law[6] * (two * uvx - one),
+                         law[2] + (law[3] - law[2]) * uy, law[4] + law[5] * nvy + law[6] * (two * uvy - one)],
+                        axis=1).astype(F32)
+
+    def _uniform_aspect(self, u: np.ndarray) -> np.ndarray:
+        return (1 + np.minimum((u * F32(self.k)).astype(np.int32), self.k - 1)).astype(np.int32)
+
+    def init_prior(self, seed: int, p_absent: float, law) -> None:
+        """prev ← the prior (see the kernel)."""
+        p = self._slots
+        self.prev[...] = self._law_draw(seed, 0, S_PRIOR + 2, p, law)
+        absent = uniform(seed, 0, S_PRIOR, p) < F32(p_absent)
+        self.prev_z[...] = np.where(absent, 0, self._uniform_aspect(uniform(seed, 0, S_PRIOR + 1, p)))
+
+    def _on_grid(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        (h, w), (hh, hw) = self.shape, self.halves
+        c, r = np.floor(x + F32(0.5)).astype(np.int32), np.floor(y + F32(0.5)).astype(np.int32)
+        return (c >= -hw) & (c < w + hw) & (r >= -hh) & (r < h + hh)
+
+    def _p_inside(self, mx: np.ndarray, my: np.ndarray, sd: float) -> np.ndarray:
+        (h, w), (hh, hw) = self.shape, self.halves
+        s = F32(SQRT_HALF) / F32(max(sd, 1e-12))
+        half = F32(0.5)
+        px = half * (erf((F32(w - 0.5 + hw) - mx) * s) - erf((F32(-hw - 0.5) - mx) * s))
+        py = half * (erf((F32(h - 0.5 + hh) - my) * s) - erf((F32(-hh - 0.5) - my) * s))
+        return px * py
+
+    def propagate(self, seed: int, frame: int, stage: int, from_ancestor: int, coupled: int, p_a: float, motion,
+                  law) -> None:
+        """prop ~ Eqs. 2, 4, 5 from prev[p] or prev[anc[p]] (see the kernel)."""
+        base, p = STAGE_BASE + STAGE_STREAMS * stage, self._slots
+        q = self.anc if from_ancestor else p
+        z, s = self.prev_z[q], self.prev[q]
+        a, b, c = (F32(v) for v in motion)
+        n = [normal(seed, frame, base + S_NOISE + i, p) for i in range(4)]
+        moved = np.stack([s[:, 0] + s[:, 1] + a * n[0], s[:, 1] + b * n[0] + c * n[1],
+                          s[:, 2] + s[:, 3] + a * n[2], s[:, 3] + b * n[2] + c * n[3]], axis=1).astype(F32)
+        u_exit, u_asp = uniform(seed, frame, base + S_EXIT, p), uniform(seed, frame, base + S_ASPECT, p)
+        if coupled:
+            stays = self._on_grid(moved[:, 0], moved[:, 2])
+        else:
+            stays = u_exit < self._p_inside(s[:, 0] + s[:, 1], s[:, 2] + s[:, 3], float(a))
+        rows = self.gcdf[np.maximum(z - 1, 0)]
+        following = (1 + np.minimum((u_asp[:, None] >= rows).sum(axis=1), self.k - 1)).astype(np.int32)
+        enter = (z == 0) & (uniform(seed, frame, base + S_ENTER, p) < F32(p_a))
+        new_z = np.where(z != 0, np.where(stays, following, 0), np.where(enter, self._uniform_aspect(u_asp), 0))
+        if enter.any():
+            moved[enter] = self._law_draw(seed, frame, base + S_F0, p[enter], law)
+        self.prop[...] = moved
+        self.prop_z[...] = new_z
+
+    def likelihood(self) -> None:
+        """prop_ll = (2λ − ρ)/(2σ_c²) (Eqs. 10, 12, 15; see the kernel)."""
+        (h, w), (hh, hw) = self.shape, self.halves
+        z = self.prop_z
+        live = np.flatnonzero((z != 0) & self._on_grid(self.prop[:, 0], self.prop[:, 2]))
+        out = np.zeros(self.capacity, F32)
+        if live.size:
+            g = live // self.n
+            c = np.floor(self.prop[live, 0] + F32(0.5)).astype(np.int64)
+            r = np.floor(self.prop[live, 2] + F32(0.5)).astype(np.int64)
+            padded = np.pad(self.d, ((0, 0), (2 * hh, 2 * hh), (2 * hw, 2 * hw)))
+            ra = r[:, None] + np.arange(2 * hh + 1) + hh  # padded rows of the template's rows
+            cb = c[:, None] + np.arange(2 * hw + 1) + hw
+            patch = padded[g[:, None, None], ra[:, :, None], cb[:, None, :]]
+            tz = self.templates[z[live] - 1]
+            lam = (tz * patch).sum(axis=(1, 2), dtype=F32)
+            e = self.energy[:, z[live] - 1, r + hh, c + hw]
+            rho = e[0] - F32(2.0) * self.gpar[g, 0] * e[1] - F32(2.0) * self.gpar[g, 1] * e[2]
+            out[live] = (F32(2.0) * lam - rho) / (F32(2.0) * self.gpar[g, 2])
+        self.prop_ll[...] = out
+
+    def weigh(self, second_stage: int) -> None:
+        """Per-group cumulative e^(v − max v) in f64 (Eqs. 18, 23, 24; see the kernel)."""
+        v = (self.prop_ll - self.cur_ll if second_stage else self.prop_ll).reshape(self.groups, self.n)
+        e = np.exp((v - v.max(axis=1, keepdims=True)).astype(np.float64))
+        cdf = np.cumsum(e, axis=1)
+        self.cdf[...] = cdf.ravel()
+        self.total[...] = cdf[:, -1]
+
+    def draw(self, seed: int, frame: int, number: int) -> None:
+        """Multinomial resampling within each group (see the kernel)."""
+        p = self._slots
+        g = p // self.n
+        target = uniform_f64(seed, frame, S_DRAW + number, p) * self.total[g]
+        cdf = self.cdf.reshape(self.groups, self.n)
+        local = np.empty(self.capacity, np.int64)
+        for grp in range(self.groups):
+            sl = slice(grp * self.n, (grp + 1) * self.n)
+            local[sl] = np.searchsorted(cdf[grp], target[sl], side="right")
+        self.pick[...] = np.minimum(local, self.n - 1) + g * self.n
+
+    def gather(self) -> None:
+        """cur ← prop[pick] with ℓ; anc ← pick."""
+        i = self.pick
+        self.cur[...], self.cur_z[...], self.cur_ll[...] = self.prop[i], self.prop_z[i], self.prop_ll[i]
+        self.anc[...] = i
+
+    def mh_move(self, seed: int, frame: int, sweep: int) -> None:
+        """The MH acceptance of Eqs. 19–21 (see the kernel)."""
+        accept = np.log(uniform(seed, frame, S_MOVE + sweep, self._slots)) <= self.prop_ll - self.cur_ll
+        self.cur[accept], self.cur_z[accept], self.cur_ll[accept] = (self.prop[accept], self.prop_z[accept],
+                                                                     self.prop_ll[accept])
+
+    def commit(self) -> None:
+        """prev ← cur."""
+        self.prev[...], self.prev_z[...] = self.cur, self.cur_z
+
+    def summarize(self) -> None:
+        """Per group: absent count, present sums, aspect counts (see the kernel)."""
+        z = self.prev_z.reshape(self.groups, self.n)
+        s = self.prev.astype(np.float64).reshape(self.groups, self.n, STATE)
+        self.gsum[:, SUM_ABSENT] = (z == 0).sum(axis=1)
+        self.gsum[:, SUM_X:SUM_X + STATE] = (s * (z != 0)[:, :, None]).sum(axis=1)
+        for a in range(self.k):
+            self.gsum[:, SUM_ASPECT + a] = (z == a + 1).sum(axis=1)

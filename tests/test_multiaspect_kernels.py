@@ -1,0 +1,317 @@
+"""The multiaspect kernels (kernels/multiaspect.py) against their NumPy twin and against references: d against the
+dense Eq. 14 matrix, λ and ρ against yᵀAh and hᵀAh at interior, edge and corner centroids, the (z, s) transition
+against Eq. 2 (P_in, G, p_a, f₀), the resample-move step keeping a toy posterior, and the APF's Eqs. 23–24 by hand."""
+import numpy as np
+import pytest
+from scipy import ndimage, stats
+
+from tbd_taichi.kernels import multiaspect as tk
+from tbd_taichi.multiaspect import aspect_transition, energy_tables, motion_noise, noise_factor, p_inside
+from tbd_taichi.numpy_kernels import multiaspect as nk
+
+BH, BV, S2 = 0.21, 0.23, 1.7
+
+
+def dense_a(h, w, bh=BH, bv=BV):
+    """Eq. 14's σ_c²Σ_v⁻¹ = I ⊗ (I − β_h B_M) − β_v B_L ⊗ I (row-lexicographic)."""
+    b = lambda n: np.eye(n, k=1) + np.eye(n, k=-1)
+    return np.kron(np.eye(h), np.eye(w) - bh * b(w)) - bv * np.kron(b(h), np.eye(w))
+
+
+def make_pools(shape, templates, groups=2, n=500, G=None):
+    """The Taichi kernels and the twin with the same templates, energy tables and G."""
+    G = aspect_transition(len(templates)) if G is None else G
+    cdf = np.cumsum(G, axis=0).T.copy()
+    cdf[:, -1] = 1.0
+    pools = (tk.MultiaspectKernels(groups, n, shape, templates.shape),
+             nk.MultiaspectKernels(groups, n, shape, templates.shape))
+    for k in pools:
+        k.put("templates", templates)
+        k.put("energy", energy_tables(templates, shape))
+        k.put("gcdf", cdf)
+    return pools
+
+
+def random_templates(rng, k=3, h=5, w=7):
+    t = rng.uniform(0.2, 2.0, (k, h, w)) * (rng.random((k, h, w)) < 0.7)
+    t[:, h // 2, w // 2] = 1.5
+    return t
+
+
+def load(pools, rng, shape, frames=None, z_low=0):
+    """Both pools with the same random particles (some off the grid), frames and GMRF rows."""
+    k0 = pools[0]
+    h, w = shape
+    c = k0.capacity
+    state = np.zeros((c, 4), np.float32)
+    state[:, 0] = rng.uniform(-8, w + 7, c)
+    state[:, 2] = rng.uniform(-8, h + 7, c)
+    state[:, [1, 3]] = rng.normal(0, 1.5, (c, 2))
+    z = rng.integers(z_low, k0.k + 1, c).astype(np.int32)
+    frames = rng.normal(0, 2, (k0.groups,) + shape).astype(np.float32) if frames is None else frames
+    gpar = np.tile(np.array([[BH, BV, S2]], np.float32), (k0.groups, 1))
+    gpar[:, 0] += 0.01 * np.arange(k0.groups)
+    for k in pools:
+        for name, v in (("prev", state), ("prev_z", z), ("frame", frames), ("gpar", gpar),
+                        ("anc", rng.integers(0, c, c).astype(np.int32))):
+            k.put(name, v)
+    return state, z, frames, gpar
+
+
+MOTION = np.asarray(noise_factor(motion_noise(6.0, 0.04, 0.2)), np.float32)
+LAW = np.array([-3, 20, -2, 15, 0.5, 0.3, 1.0], np.float32)
+
+
+@pytest.mark.parametrize("shape", [(13, 17), (8, 9)])
+def test_dmap_matches_dense_eq14_and_scipy(rng, shape):
+    pools = make_pools(shape, random_templates(rng))
+    _, _, frames, gpar = load(pools, rng, shape)
+    for k in pools:
+        k.dmap()
+        d = k.get("d")
+        for g in range(k.groups):
+            a = dense_a(*shape, gpar[g, 0], gpar[g, 1])
+            np.testing.assert_allclose(d[g].ravel(), a @ frames[g].ravel().astype(float), rtol=0, atol=2e-5)
+            kernel = np.array([[0, -gpar[g, 1], 0], [-gpar[g, 0], 1, -gpar[g, 0]], [0, -gpar[g, 1], 0]])
+            ref = ndimage.correlate(frames[g].astype(float), kernel, mode="constant")
+            np.testing.assert_allclose(d[g], ref, atol=2e-5)
+
+
+@pytest.mark.parametrize("engine", [0, 1])
+def test_likelihood_is_the_exact_gaussian_ratio_at_interior_edge_and_corner(rng, engine):
+    shape = (11, 14)
+    t = random_templates(rng, k=2, h=5, w=3)
+    pools = make_pools(shape, t, groups=1, n=8)
+    k = pools[engine]
+    frames = rng.normal(0, 2, (1,) + shape).astype(np.float32)
+    k.put("frame", frames)
+    k.put("gpar", np.array([[BH, BV, S2]], np.float32))
+    k.dmap()
+    # centroids (col, row): interior, left edge, bottom edge, corner, just on the extended grid, off it
+    spots = [(6, 5), (0, 4), (7, 10), (-1, 12), (15, -2), (16, 5)]
+    state = np.zeros((8, 4), np.float32)
+    z = np.array([1, 2, 1, 2, 1, 1, 0, 2], np.int32)
+    for i, (c, r) in enumerate(spots):
+        state[i, 0], state[i, 2] = c + 0.3, r - 0.4
+    state[6:, 0], state[6:, 2] = 5, 5
+    state[7, 0] = -40  # off the grid
+    k.put("prop", state)
+    k.put("prop_z", z)
+    k.likelihood()
+    ll = k.get("prop_ll")
+    a = dense_a(*shape)
+    for i in range(8):
+        img = np.zeros(shape)
+        c, r = int(np.floor(state[i, 0] + 0.5)), int(np.floor(state[i, 2] + 0.5))
+        if z[i]:
+            for da in range(5):
+                for db in range(3):
+                    rr, cc = r + da - 2, c + db - 1
+                    if 0 <= rr < shape[0] and 0 <= cc < shape[1]:
+                        img[rr, cc] = t[z[i] - 1, da, db]
+        h = img.ravel()
+        lam, rho = frames[0].ravel() @ a @ h, h @ a @ h  # Eqs. 11, 12
+        assert ll[i] == pytest.approx((2 * lam - rho) / (2 * S2), abs=2e-4), i
+    assert ll[5] == 0.0 and ll[6] == 0.0 and ll[7] == 0.0
+
+
+def test_every_step_agrees_with_the_twin(rng):
+    shape = (15, 19)
+    pools = make_pools(shape, random_templates(rng), groups=3, n=700)
+    load(pools, rng, shape)
+    for k in pools:
+        k.dmap()
+    for kind in ("rs", "apf"):
+        outs = []
+        for k in pools:
+            o = {}
+            k.propagate(7, 3, 0, 0, 0, 0.3, MOTION, LAW)
+            o["prop"], o["prop_z"] = k.get("prop"), k.get("prop_z")
+            k.likelihood()
+            o["ll"] = k.get("prop_ll")
+            k.weigh(0)
+            o["cdf"], o["total"] = k.get("cdf"), k.get("total")
+            k.draw(7, 3, 0)
+            o["pick"] = k.get("pick")
+            k.gather()
+            k.propagate(7, 3, 1, 1, 1, 0.3, MOTION, LAW)
+            k.likelihood()
+            o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
+            if kind == "rs":
+                k.mh_move(7, 3, 0)
+            else:
+                k.weigh(1)
+                k.draw(7, 3, 1)
+                k.gather()
+            k.commit()
+            k.summarize()
+            o["prev"], o["prev_z"], o["gsum"] = k.get("prev"), k.get("prev_z"), k.get("gsum")
+            outs.append(o)
+        a, b = outs
+        for key in a:
+            if a[key].dtype.kind in "iu":
+                np.testing.assert_array_equal(a[key], b[key], err_msg=f"{kind} {key}")
+            else:
+                np.testing.assert_allclose(a[key], b[key], rtol=1e-4, atol=1e-4, err_msg=f"{kind} {key}")
+        z = a["prev_z"].reshape(3, 700)
+        np.testing.assert_array_equal(a["gsum"][:, tk.SUM_ABSENT], (z == 0).sum(axis=1))
+        np.testing.assert_array_equal(a["gsum"][:, tk.SUM_ASPECT:], [np.bincount(r, minlength=4)[1:] for r in z])
+
+
+def test_prior_draw_agrees_and_follows_its_law(rng):
+    shape = (20, 30)
+    pools = make_pools(shape, random_templates(rng), groups=2, n=20000)
+    law = np.array([2, 12, 5, 9, 2.0, 0.1, 0.0], np.float32)
+    for k in pools:
+        k.init_prior(11, 0.25, law)
+    s0, z0 = pools[0].get("prev"), pools[0].get("prev_z")
+    np.testing.assert_allclose(s0, pools[1].get("prev"), atol=1e-5)
+    np.testing.assert_array_equal(z0, pools[1].get("prev_z"))
+    n = len(z0)
+    # P(z = 0) = 0.25 within 4 binomial sd; aspects uniform on 1..K (chi-square at the 0.1% level)
+    assert abs((z0 == 0).mean() - 0.25) < 4 * np.sqrt(0.25 * 0.75 / n)
+    counts = np.bincount(z0[z0 > 0], minlength=4)[1:]
+    assert stats.chisquare(counts).pvalue > 1e-3
+    assert s0[:, 0].min() >= 2 and s0[:, 0].max() <= 12 and s0[:, 2].min() >= 5 and s0[:, 2].max() <= 9
+    assert abs(s0[:, 1].mean() - 2.0) < 0.005 and abs(s0[:, 3].std() - 0.1) < 0.005
+
+
+def test_transition_follows_eq2(rng):
+    """Exits with 1 − P_in (Eq. 6, closed form), aspects by G's column (Eq. 1), entries with p_a, a uniform aspect
+    and s ~ f₀ (Eq. 5), the motion by Eq. 4's Q; in both engines."""
+    shape = (12, 16)
+    t = random_templates(rng, k=4, h=5, w=5)
+    n = 40000
+    pools = make_pools(shape, t, groups=1, n=n)
+    state = np.zeros((n, 4), np.float32)
+    z = np.zeros(n, np.int32)
+    # half the particles present at aspect 2 straddling the right edge of the extended grid (x + ẋ = 17.5 ± …)
+    half = n // 2
+    state[:half, 0], state[:half, 1], state[:half, 2], state[:half, 3] = 17.45, 0.0, 5.0, 0.0
+    z[:half] = 2
+    motion = np.asarray(noise_factor(motion_noise(6.0, 0.04, 0.2)), np.float32)
+    G = aspect_transition(4)
+    for k in pools:
+        k.put("prev", state)
+        k.put("prev_z", z)
+        k.propagate(3, 1, 0, 0, 0, 0.2, motion, LAW)
+    pz, ps = pools[0].get("prop_z"), pools[0].get("prop")
+    np.testing.assert_array_equal(pz, pools[1].get("prop_z"))
+    p_in = float(p_inside(17.45, 5.0, motion[0], shape, (2, 2)))
+    assert 0.2 < p_in < 0.9
+    stay = pz[:half] != 0
+    assert abs(stay.mean() - p_in) < 4 * np.sqrt(p_in * (1 - p_in) / half)
+    counts = np.bincount(pz[:half][stay], minlength=5)[1:]
+    expected = G[:, 1] * stay.sum()
+    used = expected > 0
+    assert counts[~used].sum() == 0
+    assert stats.chisquare(counts[used], expected[used]).pvalue > 1e-3
+    moved = ps[:half]
+    assert abs(moved[:, 0].std() - motion[0]) < 0.03 * motion[0]
+    cov = motion_noise(6.0, 0.04, 0.2)
+    assert abs(np.var(moved[:, 1]) - cov[1, 1]) < 0.05 * cov[1, 1]
+    assert abs(np.cov(moved[:, 0], moved[:, 1])[0, 1] - cov[0, 1]) < 0.1 * cov[0, 1]
+    entered = pz[half:] != 0
+    assert abs(entered.mean() - 0.2) < 4 * np.sqrt(0.16 / half)
+    born = ps[half:][entered]
+    assert born[:, 0].min() >= LAW[0] and born[:, 0].max() <= LAW[1]
+    assert abs(born[:, 0].mean() - (LAW[0] + LAW[1]) / 2) < 4 * (LAW[1] - LAW[0]) / np.sqrt(12 * len(born))
+    assert stats.chisquare(np.bincount(pz[half:][entered], minlength=5)[1:]).pvalue > 1e-3
+
+
+def test_coupled_exit_is_the_drawn_centroid_leaving(rng):
+    shape = (12, 16)
+    pools = make_pools(shape, random_templates(rng, k=2, h=5, w=5), groups=1, n=5000)
+    state = np.zeros((5000, 4), np.float32)
+    state[:, 0], state[:, 2] = 17.45, 5.0
+    for k in pools:
+        k.put("prev", state)
+        k.put("prev_z", np.ones(5000, np.int32))
+        k.propagate(3, 1, 0, 0, 1, 0.0, MOTION, LAW)
+        off = np.floor(k.get("prop")[:, 0] + 0.5) > 17
+        np.testing.assert_array_equal(k.get("prop_z") == 0, off)
+
+
+@pytest.mark.parametrize("engine", [0, 1])
+def test_resample_move_keeps_the_posterior_of_a_toy_model(rng, engine):
+    """One ancestor, d = 0 and an interior target: ℓ depends on the aspect only (ℓ_i = −ρ_i/2σ_c²), so the
+    posterior of z is ∝ G(i, j)·e^(ℓ_i); the resampled and MH-moved aspects must follow it."""
+    shape = (30, 30)
+    t = np.ones((3, 3, 3)) * np.array([0.3, 0.8, 1.2])[:, None, None]
+    n = 30000
+    pools = make_pools(shape, t, groups=1, n=n)
+    k = pools[engine]
+    k.put("frame", np.zeros((1,) + shape, np.float32))
+    k.put("gpar", np.array([[0.0, 0.0, 4.0]], np.float32))
+    k.dmap()
+    state = np.tile(np.array([[15.0, 0.0, 15.0, 0.0]], np.float32), (n, 1))
+    k.put("prev", state)
+    k.put("prev_z", np.full(n, 2, np.int32))
+    k.propagate(5, 2, 0, 0, 0, 0.0, MOTION, LAW)
+    k.likelihood()
+    k.weigh(0)
+    k.draw(5, 2, 0)
+    k.gather()
+    k.propagate(5, 2, 1, 1, 0, 0.0, MOTION, LAW)
+    k.likelihood()
+    k.mh_move(5, 2, 0)
+    z = k.get("cur_z")
+    ell = -(t.reshape(3, -1) ** 2).sum(axis=1) / (2 * 4.0)
+    post = aspect_transition(3)[:, 1] * np.exp(ell)
+    post /= post.sum()
+    counts = np.bincount(z, minlength=4)[1:]
+    # multinomial resampling plus an MH move: counts near n·post (chi-square; the MH step adds correlation, so a
+    # lenient level)
+    assert stats.chisquare(counts, post * n).pvalue > 1e-4
+    assert abs(counts[2] / n - post[2]) < 0.02
+
+
+@pytest.mark.parametrize("engine", [0, 1])
+def test_apf_stage_weights_by_hand(rng, engine):
+    """Eq. 23: μ ∝ e^ℓ̂; Eq. 24: w̃_j ∝ e^(ℓ̃_j − ℓ̂_{i(j)}) for a 6-particle pool."""
+    shape = (9, 9)
+    t = random_templates(rng, k=2, h=3, w=3)
+    k = make_pools(shape, t, groups=1, n=6)[engine]
+    load((k,), rng, shape, z_low=1)
+    state = k.get("prev")
+    state[:, 0], state[:, 2] = rng.uniform(0, 8, 6), rng.uniform(0, 8, 6)
+    k.put("prev", state)
+    k.dmap()
+    k.propagate(1, 4, 0, 0, 0, 0.0, MOTION, LAW)
+    k.likelihood()
+    ll_hat = k.get("prop_ll").astype(float)
+    k.weigh(0)
+    np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(ll_hat - ll_hat.max())), rtol=1e-5)
+    k.draw(1, 4, 0)
+    aux = k.get("pick")
+    k.gather()
+    np.testing.assert_array_equal(k.get("anc"), aux)
+    k.propagate(1, 4, 1, 1, 0, 0.0, MOTION, LAW)
+    k.likelihood()
+    ll_new = k.get("prop_ll").astype(float)
+    k.weigh(1)
+    v = ll_new - ll_hat[aux]
+    np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
+    # the fresh draw starts from the auxiliary index's n − 1 state: with no motion noise, prop = F·prev[aux]
+    k.propagate(1, 4, 2, 1, 0, 0.0, np.zeros(3, np.float32), LAW)
+    prev = k.get("prev")
+    np.testing.assert_allclose(k.get("prop")[:, 0], prev[aux, 0] + prev[aux, 1], atol=1e-5)
+
+
+def test_multinomial_draws_follow_the_weights(rng):
+    shape = (8, 8)
+    pools = make_pools(shape, random_templates(rng, k=1, h=3, w=3), groups=2, n=8)
+    for k in pools:
+        k.put("prop_ll", np.log(np.array([1, 0, 3, 0, 0, 4, 0, 2, 0, 0, 0, 0, 0, 0, 0, 1e-3], np.float32) + 1e-30))
+    picks = []
+    for k in pools:
+        hist = np.zeros(16)
+        k.weigh(0)
+        for f in range(2000):
+            k.draw(9, f, 0)
+            hist += np.bincount(k.get("pick"), minlength=16)
+        picks.append(hist)
+    np.testing.assert_array_equal(picks[0], picks[1])
+    first = picks[0][:8] / picks[0][:8].sum()
+    np.testing.assert_allclose(first[[0, 2, 5, 7]], np.array([1, 3, 4, 2]) / 10, atol=0.01)  # 4 sd of 16000 draws
+    assert picks[0][8:].sum() == 16000 and picks[0][15] == 16000  # the second group's one live weight
