@@ -38,23 +38,32 @@ def _truth_csv_path(out: Path) -> Path:
 
 
 def check_simulate(args) -> None:
-    """The scenario's arguments (jia2022: --shape with sides ≥ 8, --frames, --snr; long2012: --case, --snr-db), the
-    memory the frames need, and the two output files."""
+    """The scenario's arguments (jia2022: --shape with sides ≥ 8, --frames, --snr; long2012: --case, --snr-db;
+    bruno2008: --ptcr, --exit-reentry, --frames), the memory the frames need, and the two output files."""
     from .simulate import check_memory
 
+    own = {"jia2022": ("--shape", "--frames", "--snr"), "long2012": ("--case", "--snr-db"),
+           "bruno2008": ("--ptcr", "--exit-reentry", "--frames")}
+    given = {"--shape": args.shape, "--frames": args.frames, "--snr": args.snr, "--case": args.case,
+             "--snr-db": args.snr_db, "--ptcr": args.ptcr, "--exit-reentry": args.exit_reentry or None}
+    for flag, value in given.items():
+        if value is not None and flag not in own[args.scenario]:
+            owners = " or ".join(s for s, flags in own.items() if flag in flags)
+            raise TBDError(f"{flag} applies to --scenario {owners}; --scenario {args.scenario} takes "
+                           f"{', '.join(own[args.scenario])}")
     if args.scenario == "long2012":
         from .long2012 import check_case
 
-        given = [f for f, v in (("--shape", args.shape), ("--frames", args.frames), ("--snr", args.snr)) if v is not None]
-        if given:
-            raise TBDError(f"{given[0]} applies to --scenario jia2022; --scenario long2012 takes --case and --snr-db")
-        check_case(args.case, args.snr_db)
+        check_case(args.case or "5.2", args.snr_db)
+    elif args.scenario == "bruno2008":
+        from .bruno2008 import FRAMES, MIN_REENTRY_FRAMES, PTCRS, SHAPE, check_bruno2008
+
+        check_bruno2008(PTCRS[0] if args.ptcr is None else args.ptcr, args.frames, args.exit_reentry)
+        check_memory(SHAPE, MIN_REENTRY_FRAMES if args.exit_reentry else args.frames or FRAMES)
     else:
         missing = [f for f, v in (("--shape", args.shape), ("--frames", args.frames), ("--snr", args.snr)) if v is None]
         if missing:
             raise TBDError(f"--scenario jia2022 needs {', '.join(missing)}")
-        if args.snr_db is not None:
-            raise TBDError("--snr-db applies to --scenario long2012; jia2022 takes --snr")
         check_memory(validate.frame_shape("--shape", args.shape), args.frames)
     out = validate.output_path("--out", args.out, (".npz",))
     validate.output_path("--out (its truth CSV)", _truth_csv_path(out))
@@ -63,17 +72,28 @@ def check_simulate(args) -> None:
 def cmd_simulate(args) -> int:
     from .simulate import simulate
 
+    arrays = {}
     if args.scenario == "long2012":
         from .long2012 import simulate_long2012
 
-        scene = simulate_long2012(args.case, seed=args.seed, snr_db=args.snr_db)
-        what = f"Long et al. 2012 §{args.case}"
+        case = args.case or "5.2"
+        scene = simulate_long2012(case, seed=args.seed, snr_db=args.snr_db)
+        what = f"Long et al. 2012 §{case}"
+    elif args.scenario == "bruno2008":
+        from .bruno2008 import PTCRS, local_mean, simulate_bruno2008, streams
+
+        ptcr = PTCRS[0] if args.ptcr is None else args.ptcr
+        scene = simulate_bruno2008(seed=args.seed, ptcr_db=ptcr, exit_reentry=args.exit_reentry, frames=args.frames)
+        arrays["local_mean"] = local_mean(streams(args.seed)[0]).astype(np.float32)  # the oracle mean (§4)
+        what = f"Bruno et al. 2008, PTCR {ptcr:g} dB" + (
+            f", exit at frame {scene.params['exit_frame']}, re-entry at {scene.params['entry_frame']}"
+            if args.exit_reentry else "")
     else:
         scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
                          seed=args.seed, motion=args.motion)
         what = f"SNR {args.snr}"
     out = Path(args.out)
-    np.savez_compressed(out, frames=scene.frames, truth=scene.truth, params=json.dumps(scene.params))
+    np.savez_compressed(out, frames=scene.frames, truth=scene.truth, params=json.dumps(scene.params), **arrays)
     truth_csv = _truth_csv_path(out)
     tables.write_csv(scene.truth, truth_csv)
     t, h, w = scene.frames.shape
@@ -223,18 +243,29 @@ def build_parser() -> argparse.ArgumentParser:
         "Coordinates: x = column, y = row, 0-based, pixel centres at integers; frames are 0-based."))
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    sim = sub.add_parser("simulate", help="simulate a sequence (SGDS-PF section 3.1, or Long et al. 2012 section 5)",
-                         description="Simulate dim targets in white Gaussian noise: SGDS-PF Eqs. 1, 14, 44-46 (--scenario jia2022) or Long et al. 2012 §5 with Eq. 4 and jitter (--scenario long2012 --case). "
-                                     "Writes OUT (.npz with arrays 'frames' and 'truth') and OUT_truth.csv beside it.")
-    sim.add_argument("--scenario", choices=("jia2022", "long2012"), default="jia2022",
-                     help="jia2022: SGDS-PF's targets (default); long2012: Long et al. 2012's §5 scenes (--case)")
-    sim.add_argument("--case", choices=("5.1", "5.2", "5.3"), default="5.2",
+    sim = sub.add_parser("simulate", help="simulate a sequence (SGDS-PF section 3.1, Long et al. 2012 section 5 or "
+                         "Bruno et al. 2008 section 4)",
+                         description="Simulate dim targets in white Gaussian noise: SGDS-PF Eqs. 1, 14, 44-46 (--scenario jia2022) or Long et al. 2012 §5 with Eq. 4 and jitter (--scenario long2012 --case); "
+                                     "or a multiaspect extended target in GMRF clutter on a smooth local mean, Bruno et al. 2008 Eqs. 1-9 and §4 (--scenario bruno2008 [--ptcr] [--exit-reentry]). "
+                                     "Writes OUT (.npz with arrays 'frames' and 'truth'; bruno2008 adds 'local_mean') and OUT_truth.csv beside it "
+                                     "(bruno2008 adds an integer 'aspect' column, 1-4).")
+    sim.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008"), default="jia2022",
+                     help="jia2022: SGDS-PF's targets (default); long2012: Long et al. 2012's §5 scenes (--case); "
+                          "bruno2008: Bruno et al. 2008's §4 scene, 120x120 (--ptcr, --exit-reentry, --frames)")
+    sim.add_argument("--case", choices=("5.1", "5.2", "5.3"), default=None,
                      help="long2012: 5.1 one CV target, 5.2 three manoeuvring targets (default), 5.3 three launches")
+    sim.add_argument("--ptcr", type=number(positive, -20.0), default=None, metavar="DB",
+                     help="bruno2008: peak target-to-clutter ratio 20·log10(max template / σ_c), dB, in (-20, 60] "
+                          "(default 6.5; §4 also runs 8.1)")
+    sim.add_argument("--exit-reentry", action="store_true",
+                     help="bruno2008: the target runs until it leaves, 6 frames are empty, then a new target appears "
+                          "(Figs. 1-5; at least 51 frames; not with --frames)")
     sim.add_argument("--snr-db", type=number(positive), default=None,
                      help="long2012: every target's peak SNR of Eq. 5, dB (default: the paper's)")
     sim.add_argument("--shape", type=number(whole, validate.MIN_SIDE), nargs=2, metavar=("H", "W"), default=None,
                      help="jia2022: frame height and width, px (each ≥ 8)")
-    sim.add_argument("--frames", type=number(whole, 1), default=None, help="jia2022: number of frames T (≥ 1)")
+    sim.add_argument("--frames", type=number(whole, 1), default=None,
+                     help="jia2022: number of frames T (≥ 1); bruno2008: 3-10000 (default 20)")
     sim.add_argument("--snr", type=number(positive), default=None,
                      help="jia2022: target SNR of Eq. 1: centre-pixel signal / noise std")
     sim.add_argument("--targets", type=number(whole, 1), default=1, help="number of targets (≥ 1, default 1)")

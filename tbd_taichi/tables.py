@@ -7,7 +7,7 @@ Coordinates everywhere: x = column, y = row, 0-based, pixel centres at integers;
   confirmed track per frame;
 * truth: ``frame,target_id,x,y,vx,vy,intensity`` — one row per target per frame
   in which it is in view (the long2012 simulator's adds ``model``, an index into
-  ``motion_models.MODELS``).
+  ``motion_models.MODELS``; the bruno2008 simulator's ``aspect``, the template 1..K).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from .errors import InputError
 TRACK_COLUMNS = ("frame", "track_id", "x", "y", "vx", "vy", "intensity", "confidence")
 TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
 BOX_COLUMNS = ("frame", "x", "y", "w", "h")  # labelled target boxes (drone-ir): corner x = column, y = row
-INTEGER_COLUMNS = ("frame", "track_id", "target_id", "model")  # int64 in a table, written without decimals
+INTEGER_COLUMNS = ("frame", "track_id", "target_id", "model", "aspect")  # int64 in a table, written without decimals
 
 
 def _dtype(columns: tuple[str, ...]) -> np.dtype:
@@ -138,9 +138,11 @@ def read_tracks(path) -> np.ndarray:
 
 
 def read_truth(path) -> np.ndarray:
-    """Point truth CSV ``frame,target_id,x,y[,vx,vy,intensity][,model]`` (a missing vx, vy or intensity reads as 0;
-    ``model``, the long2012 simulator's motion-model index, is a column of the table only when the file has it)."""
-    optional = TRUTH_COLUMNS[4:] + (("model",) if "model" in read_header(path) else ())
+    """Point truth CSV ``frame,target_id,x,y[,vx,vy,intensity][,model][,aspect]`` (a missing vx, vy or intensity
+    reads as 0; ``model``, the long2012 simulator's motion-model index, and ``aspect``, the bruno2008 simulator's
+    template 1..K, are columns of the table only when the file has them)."""
+    header = read_header(path)
+    optional = TRUTH_COLUMNS[4:] + tuple(c for c in ("model", "aspect") if c in header)
     return read_csv(path, TRUTH_COLUMNS[:4], optional)
 
 
