@@ -80,9 +80,11 @@ def benchmark_pool(shape, particles: int, groups: int, engine: str, snr: float, 
     return pool
 
 
-def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds"):
+def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds",
+                     settings=None):
     """One ``update`` of method ``method``'s tracker per call, which returns the seconds each of its stages
-    (``timings``) took; and a function that releases the tracker (SGDS-PF's front-end process, if any)."""
+    (``timings``) took; and a function that releases the tracker (SGDS-PF's front-end process, if any).
+    ``settings``: parameters over the method's bench keywords (``bench --param``)."""
     from . import methods
 
     spec = methods.get(method)
@@ -91,7 +93,8 @@ def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
         if "frontend_process" not in spec.options:
             raise ParameterError(f"--frontend-process applies to sgds only, not to {method}")
         options["frontend_process"] = True
-    tracker = methods.make_tracker(method, shape, engine=engine, **spec.bench_keywords(snr), **options)
+    tracker = methods.make_tracker(method, shape, engine=engine, **{**spec.bench_keywords(snr), **(settings or {})},
+                                   **options)
 
     def step(frame: np.ndarray) -> dict[str, float]:
         before = tracker.timings
@@ -101,8 +104,10 @@ def pipeline_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
     return step, getattr(tracker, "close", lambda: None)
 
 
-def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds"):
-    """Normalisation and the saliency stage only (no particle filters; ``frontend_process``, ``method`` unused)."""
+def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = False, method: str = "sgds",
+                     settings=None):
+    """Normalisation and the saliency stage only (no particle filters; ``frontend_process``, ``method``,
+    ``settings`` unused)."""
     from .methods.sgds.params import SGDSParams
     from .saliency import SaliencyExtractor
 
@@ -119,7 +124,7 @@ def saliency_stepper(shape, snr: float, engine: str, frontend_process: bool = Fa
 
 def engine_samples(frames: np.ndarray, snr: float, engines: tuple, particles: int = 0, groups: int = 1,
                    pipeline: bool = True, frontend_process: bool = False,
-                   kernel_time: bool = False, method: str = "sgds") -> dict[str, dict[str, list[float]]]:
+                   kernel_time: bool = False, method: str = "sgds", settings=None) -> dict[str, dict[str, list[float]]]:
     """The runs of ``engines`` over raw ``frames`` (T, H, W), frame by frame in turn (in ``engines``' order on
     even frames, reversed on odd ones), so that a slow spell of the machine slows each alike; with one engine, its
     run alone.  Per engine, seconds per timed frame (after WARMUP) of each stage and of the whole step
@@ -128,7 +133,7 @@ def engine_samples(frames: np.ndarray, snr: float, engines: tuple, particles: in
     stepper = pipeline_stepper if pipeline else saliency_stepper
     steps, closers, pools = {}, [], {}
     for engine in engines:
-        steps[engine], close = stepper(frames.shape[1:], snr, engine, frontend_process, method)
+        steps[engine], close = stepper(frames.shape[1:], snr, engine, frontend_process, method, settings)
         closers.append(close)
         pools[engine] = benchmark_pool(frames.shape[1:], particles, groups, engine, snr) if particles else None
     samples: dict[str, dict[str, list[float]]] = {engine: {} for engine in engines}
@@ -210,7 +215,8 @@ def peak_rss_mib() -> float:
 
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
-              frontend_process: bool = False, runs: int = 1, paired: bool = False, method: str = "sgds") -> dict:
+              frontend_process: bool = False, runs: int = 1, paired: bool = False, method: str = "sgds",
+              settings=None) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
     ``method``: the registered method whose tracker is timed (``pipeline``).
     ``frontend_process``: the trackers run normalisation and saliency in a second process.  ``runs`` > 1
@@ -219,18 +225,22 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     ``run_update_ms`` lists each run's median update time (``run_ratios``: NumPy over Taichi, run by run).
     ``paired``: in each run the engines take the frames in turn, frame by frame (their trackers side by side in
     memory), so that even a short slow spell falls on both.  On the CPU backend each engine also reports the
-    median time in kernel launches and outside them (``kernels_ms``, ``host_ms``)."""
+    median time in kernel launches and outside them (``kernels_ms``, ``host_ms``).  ``settings``: the method's
+    parameters over its bench keywords (``--param``); the frames are the method's ``bench_frames`` if it has them."""
     if runs < 1:
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
     from . import methods
 
-    scene = {"snr": snr, "motion": "transit", **methods.get(method).bench_scene}  # an unknown method fails here
+    spec = methods.get(method)  # an unknown method fails here
+    scene = {"snr": snr, "motion": "transit", **spec.bench_scene}
     backend.keep_freed_memory()
     cfg = backend.init(arch)
-    frames = simulate(tuple(shape), frames=n_frames + WARMUP, seed=seed, **scene).frames
+    frames = spec.bench_frames(tuple(shape), n_frames + WARMUP, seed) if spec.bench_frames else \
+        simulate(tuple(shape), frames=n_frames + WARMUP, seed=seed, **scene).frames
     result = {"method": method, "shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "particles": particles, "groups": groups, "pipeline": pipeline,
               "frontend_process": bool(frontend_process and pipeline), "runs": runs, "paired": bool(paired),
+              "settings": dict(settings or {}),
               "machine": machine_description(), "versions": software_versions(), "engines": {}}
     engines = tuple(engines)
     samples: dict[str, list] = {engine: [] for engine in engines}
@@ -238,7 +248,8 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
         order = engines if r % 2 == 0 else engines[::-1]
         for together in ([order] if paired else [(engine,) for engine in order]):
             for engine, run in engine_samples(frames, snr, together, particles, groups, pipeline, frontend_process,
-                                              kernel_time=cfg.arch == "cpu", method=method).items():
+                                              kernel_time=cfg.arch == "cpu", method=method,
+                                              settings=settings).items():
                 samples[engine].append(run)
     for engine in engines:
         result["engines"][engine] = engine_summary(samples[engine])

@@ -36,7 +36,8 @@ from .tables import TRUTH_COLUMNS, _dtype, make_table
 
 SHAPE = (120, 120)  # px: the figures' axes span [0, 24] m at 0.2 m/px
 BETA_H, BETA_V, SIGMA_C = 0.22, 0.24, 1.0  # smooth terrain (β_h + β_v < ½); clutter in units of σ_c
-MEAN_LEVEL, MEAN_RELIEF, MEAN_SMOOTH = 100.0, 20.0, 15.0  # local mean: level, sd and smoothing σ (px)
+MEAN_LEVEL, MEAN_RELIEF, MEAN_SMOOTH = 100.0, 10.0, 40.0  # local mean: level, sd and smoothing σ (px): smooth
+# terrain (the paper's real IRAR means are smooth); its residual after the filters' 33 px local mean has sd ≈ 0.4σ_c
 FRAMES = 20  # §4's Monte Carlo runs
 PTCRS = (6.5, 8.1)  # dB, §4's Monte Carlo
 EMPTY_FRAMES = 6  # Figs. 4–5: the target leaves at frame 31 and a new one appears at 37 (1-based)
@@ -174,14 +175,16 @@ def _clutter(rng: np.random.Generator, frames: np.ndarray) -> None:
 
 
 def simulate_bruno2008(seed: int = 0, ptcr_db: float = 6.5, exit_reentry: bool = False, frames: int | None = None,
-                       templates=None) -> Scenario:
-    """The frames (T, 120, 120) float32 = local mean + template + GMRF clutter, the truth (with ``aspect``)
-    and the parameters of a §4 scene.  ``templates`` (K, h, w) replace the vehicle (scaled so that their
-    maximum |a| gives ``ptcr_db``; G then is ``aspect_transition(K)``).  The same seed gives the same frames."""
-    from .validate import whole
+                       templates=None, shape=SHAPE) -> Scenario:
+    """The frames (T, H, W) float32 = local mean + template + GMRF clutter, the truth (with ``aspect``)
+    and the parameters of a §4 scene (``shape`` 120×120: the paper's figures; others for benchmarks).
+    ``templates`` (K, h, w) replace the vehicle (scaled so that their maximum |a| gives ``ptcr_db``; G then is
+    ``aspect_transition(K)``).  The same seed gives the same frames."""
+    from .validate import frame_shape, whole
 
     check_bruno2008(ptcr_db, frames, exit_reentry)
     whole("seed", seed, 0)
+    shape = frame_shape("shape", shape)
     peak = ptcr_peak(float(ptcr_db))
     if templates is None:
         templates = vehicle_templates(peak)
@@ -190,17 +193,17 @@ def simulate_bruno2008(seed: int = 0, ptcr_db: float = 6.5, exit_reentry: bool =
         templates = templates * (peak / np.abs(templates).max())
     G, halves = aspect_transition(len(templates)), half_sizes(templates)
     mean_rng, path_rng, clutter_rng = streams(seed)
-    mean = local_mean(mean_rng)
+    mean = local_mean(mean_rng, shape)
     exit_frame = entry_frame = None
     if exit_reentry:
-        first = target_path(path_rng, MAX_FIRST_PATH, SHAPE, halves, G)
+        first = target_path(path_rng, MAX_FIRST_PATH, shape, halves, G)
         exit_frame, entry_frame = len(first), len(first) + EMPTY_FRAMES
         n_frames = max(MIN_REENTRY_FRAMES, entry_frame + AFTER_ENTRY)
-        paths = [first, target_path(path_rng, n_frames - entry_frame, SHAPE, halves, G, start_frame=entry_frame)]
+        paths = [first, target_path(path_rng, n_frames - entry_frame, shape, halves, G, start_frame=entry_frame)]
     else:
         n_frames = FRAMES if frames is None else int(frames)
-        paths = [target_path(path_rng, n_frames, SHAPE, halves, G)]
-    images = np.empty((n_frames,) + SHAPE, dtype=np.float32)
+        paths = [target_path(path_rng, n_frames, shape, halves, G)]
+    images = np.empty((n_frames,) + shape, dtype=np.float32)
     images[:] = mean
     peaks = np.abs(templates).max(axis=(1, 2))
     rows = []
@@ -211,5 +214,10 @@ def simulate_bruno2008(seed: int = 0, ptcr_db: float = 6.5, exit_reentry: bool =
     _clutter(clutter_rng, images)
     params = dict(scenario="bruno2008", seed=seed, ptcr_db=float(ptcr_db), beta_h=BETA_H, beta_v=BETA_V,
                   sigma_c=SIGMA_C, exit_reentry=bool(exit_reentry), exit_frame=exit_frame, entry_frame=entry_frame,
-                  q=PAPER_Q, T=PAPER_T, zeta=PAPER_ZETA, shape=list(SHAPE), frames=n_frames)
+                  q=PAPER_Q, T=PAPER_T, zeta=PAPER_ZETA, shape=list(shape), frames=n_frames)
     return Scenario(images, make_table(rows, _dtype(BRUNO2008_TRUTH_COLUMNS)), params)
+
+
+def bench_frames(shape, n_frames: int, seed: int = 0) -> np.ndarray:
+    """``tbd-taichi bench``'s frames for the multiaspect filters: a §4 scene of ``shape`` at PTCR 6.5 dB."""
+    return simulate_bruno2008(seed, PTCRS[0], frames=max(3, n_frames), shape=shape).frames[:n_frames]

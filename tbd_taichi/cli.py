@@ -137,7 +137,8 @@ def check_bench(args) -> list[str]:
         raise TBDError(f"--particles {args.particles} must be at least --groups {args.groups} (or 0: off)")
     shape = validate.frame_shape("--shape", args.shape)
     spec = methods.get(args.method)
-    params, _ = methods.checked_settings(spec, shape, spec.bench_keywords(args.snr))
+    args.settings = spec.parse_assignments(args.param)
+    params, _ = methods.checked_settings(spec, shape, {**spec.bench_keywords(args.snr), **args.settings})
     frames_as_particles = shape[0] * shape[1] * args.frames * 4 // validate.PARTICLE_BYTES  # the simulated frames
     validate.tracker_memory(f"bench --shape {shape[0]} {shape[1]} ({len(engines)} engine(s))", shape,
                             lambda: spec.particles(shape, params) * len(engines)
@@ -151,7 +152,7 @@ def cmd_bench(args) -> int:
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=args.checked, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
                        frontend_process=args.frontend_process, runs=args.runs, paired=args.paired,
-                       method=args.method)
+                       method=args.method, settings=args.settings)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 
@@ -176,6 +177,8 @@ def check_evaluate_suite(args) -> dict:
     scenarios = {methods.get(m).scenario for m in chosen}
     if args.scenario == "long2012" and chosen != ("mm-phd",):
         raise TBDError(f"--scenario long2012 evaluates --methods mm-phd (and its ablations), got {args.methods!r}")
+    if args.scenario == "bruno2008" and not set(chosen) <= {"ma-rs", "ma-apf"}:
+        raise TBDError(f"--scenario bruno2008 evaluates --methods ma-rs,ma-apf (both run), got {args.methods!r}")
     if args.scenario == "jia2022" and scenarios != {"jia2022"}:
         raise TBDError(f"--methods {args.methods} is evaluated on --scenario {scenarios.pop()}; give it")
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
@@ -197,6 +200,8 @@ def cmd_evaluate_suite(args) -> int:
     plan = args.checked
     if args.scenario == "long2012":
         return run_long2012_suite(args, plan["tests"], plan["out_dir"])
+    if args.scenario == "bruno2008":
+        return run_bruno2008_suite(args, plan["tests"], plan["out_dir"])
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
     runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
     out_dir.mkdir(exist_ok=True)
@@ -228,6 +233,24 @@ def run_long2012_suite(args, tests: int, out_dir: Path) -> int:
     command = (f"tbd-taichi evaluate-suite --methods mm-phd --scenario long2012 --tests {tests} --seed {args.seed} "
                f"--out-dir {out_dir}")
     print(f"report -> {suite_long2012.write_report(results, out_dir, command)}")
+    return 0
+
+
+def run_bruno2008_suite(args, tests: int, out_dir: Path) -> int:
+    """evaluate-suite --scenario bruno2008: Bruno et al.'s §4 Monte Carlo table, Fig. 6 and the exit/re-entry runs
+    (suite_bruno2008), both filters on the same realisations."""
+    from . import suite_bruno2008
+    from .progress import frame_progress
+
+    out_dir.mkdir(exist_ok=True)
+    runs = suite_bruno2008.plan(tests, args.seed)
+    print(f"{len(runs)} runs (ma-apf, ma-rs x PTCR 6.5, 8.1 dB x {tests}; exit/re-entry) -> {out_dir}")
+    with frame_progress("runs", len(runs), "off" if args.no_progress else "auto") as progress:
+        results = suite_bruno2008.execute(tests, out_dir, args.seed, progress)
+    command = (f"tbd-taichi evaluate-suite --methods ma-rs,ma-apf --scenario bruno2008 --tests {tests} "
+               f"--seed {args.seed} --out-dir {out_dir}")
+    print(suite_bruno2008.tables_markdown(results, command))
+    print(f"report -> {suite_bruno2008.write_report(results, out_dir, command)}")
     return 0
 
 
@@ -309,9 +332,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "mean DSR, false tracks and ms/frame as a markdown table, JSON and PNG figures. "
                                     "Runs are appended to OUT_DIR/suite_runs.jsonl as they finish: Ctrl-C keeps them "
                                     "and a rerun skips them.")
-    es.add_argument("--scenario", choices=("jia2022", "long2012"), default="jia2022",
+    es.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008"), default="jia2022",
                     help="jia2022: SGDS-PF's SNR x size suite (default); long2012: Long et al.'s §5 scenes for "
-                         "--methods mm-phd (Tables 2-4, Figs. 2, 4, 5, 7)")
+                         "--methods mm-phd (Tables 2-4, Figs. 2, 4, 5, 7); bruno2008: Bruno et al.'s §4 Monte "
+                         "Carlo and exit/re-entry runs for --methods ma-rs,ma-apf (Fig. 6)")
     es.add_argument("--tests", type=number(whole, 1), default=100, help="sequences per condition (default 100)")
     es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition")
     es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
@@ -350,6 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--groups", type=number(whole, 1), default=1, help="filters the pool is split into (default 1)")
     be.add_argument("--no-pipeline", action="store_true",
                     help="time only normalisation and saliency (and --particles), not the whole SGDSPF.update")
+    be.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="a parameter of --method over its bench settings (repeatable; e.g. n_particles=1000000)")
     be.add_argument("--json", action="store_true", help="print one JSON object as the last line")
     be.add_argument("--frontend-process", action="store_true", help=FRONTEND_PROCESS_HELP)
     _common(be)

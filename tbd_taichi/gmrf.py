@@ -1,10 +1,28 @@
 """First-order noncausal Gauss–Markov random field clutter (Bruno et al. 2008, Eqs. 9, 13, 14; Moura & Balram):
 V(r, j) = β_v[V(r−1, j) + V(r+1, j)] + β_h[V(r, j−1) + V(r, j+1)] + ε(r, j) with zero boundary, precision
-Σ_v⁻¹ = A/σ_c², A = I ⊗ (I − β_h B_M) − β_v B_L ⊗ I (Eq. 14), diagonalised by the 2-D DST-I (notes A4)."""
+Σ_v⁻¹ = A/σ_c², A = I ⊗ (I − β_h B_M) − β_v B_L ⊗ I (Eq. 14), diagonalised by the 2-D DST-I (notes A4).
+
+Fields are in the frame's intensity units (σ_c² in units²); β_h, β_v are dimensionless.  The maximum-likelihood
+estimator (notes B1) needs ln det A and its β-derivatives every frame: they are summed over the L rows in closed
+form (the M-column sum of each row is a tridiagonal Toeplitz determinant, a Chebyshev U_M), so one evaluation costs
+O(L), not O(L·M)."""
 from __future__ import annotations
 
+import functools
+import math
+from dataclasses import dataclass
+
 import numpy as np
-from scipy import fft
+from scipy import fft, ndimage
+
+from .errors import ParameterError
+
+MARGIN = 1e-6          # smallest eigenvalue λ_min (exact) or 1 − 2|β_h| − 2|β_v| (approximate) the estimator visits
+SIGMA2_FLOOR = 1e-30   # units²: σ̂_c² of a constant frame (S0 = 0); positive even after a cast to float32
+_TOL, _MAX_ITER = 1e-7, 50
+_X_SERIES, _N_SERIES = 4.0, 15   # rows with x = a/2|b| ≥ 4 use the cosine-moment series (error < (1/16)^15)
+_DIRECT_COLS = 16                # up to this many columns the row sums are plain sums
+_QUAD = 256                      # midpoint nodes on [0, π] for the approximate (large-grid) log-determinant
 
 
 def eigenvalues(shape, beta_h: float, beta_v: float) -> np.ndarray:
@@ -21,3 +39,260 @@ def sample_gmrf(rng: np.random.Generator, shape, beta_h: float, beta_v: float, s
     lam = eigenvalues(shape, beta_h, beta_v)
     w = rng.standard_normal((n,) + tuple(shape))
     return sigma_c * fft.dstn(w / np.sqrt(lam), type=1, norm="ortho", axes=(1, 2))
+
+
+def _lambda_min(shape, beta_h: float, beta_v: float) -> float:
+    """min λ_kl = 1 − 2|β_v|cos(π/(L+1)) − 2|β_h|cos(π/(M+1)) (notes A4), dimensionless."""
+    return 1.0 - 2.0 * abs(beta_v) * math.cos(math.pi / (shape[0] + 1)) - 2.0 * abs(beta_h) * math.cos(math.pi / (shape[1] + 1))
+
+
+def positive_definite(shape, beta_h: float, beta_v: float) -> bool:
+    """A (Eq. 14) is positive definite iff 2|β_v|cos(π/(L+1)) + 2|β_h|cos(π/(M+1)) < 1 (notes A4)."""
+    return bool(_lambda_min(shape, beta_h, beta_v) > 0.0)
+
+
+def check_gmrf(shape, beta_h: float, beta_v: float, sigma_c: float) -> None:
+    """ParameterError unless β_h, β_v, σ_c are finite, σ_c > 0 (units) and A(β) is positive definite (notes A4)."""
+    if not all(math.isfinite(float(x)) for x in (beta_h, beta_v, sigma_c)):
+        raise ParameterError(f"GMRF parameters must be finite, got beta_h={beta_h}, beta_v={beta_v}, sigma_c={sigma_c}")
+    if not sigma_c > 0:
+        raise ParameterError(f"sigma_c must be > 0, got {sigma_c}")
+    if not positive_definite(shape, beta_h, beta_v):
+        raise ParameterError(f"beta_h={beta_h}, beta_v={beta_v} do not give a positive definite A on a {shape[0]}×"
+                             f"{shape[1]} grid: need 2|beta_v|cos(π/(L+1)) + 2|beta_h|cos(π/(M+1)) < 1")
+
+
+def lag_sums(v) -> tuple[float, float, float]:
+    """(S0, S_h, S_v) = (Σ v(r,j)², Σ v(r,j)v(r,j+1), Σ v(r,j)v(r+1,j)) in float64 (notes B1), units²; then
+    vᵀAv = S0 − 2β_h·S_h − 2β_v·S_v."""
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    if v.ndim != 2:
+        raise ParameterError(f"v must be a 2-D frame, got shape {v.shape}")
+    f, m = v.ravel(), v.shape[1]
+    s_h = float(f[:-1] @ f[1:] - v[:-1, -1] @ v[1:, 0])  # the row-major neighbours minus the row wrap-arounds
+    return float(f @ f), s_h, float(f[:-m] @ f[m:])
+
+
+@functools.lru_cache(maxsize=64)
+def _cosines(n: int) -> np.ndarray:
+    """cos(kπ/(n+1)), k = 1..n (the DST-I frequencies of notes A4), read-only."""
+    c = np.cos(np.arange(1, n + 1) * np.pi / (n + 1))
+    c.flags.writeable = False
+    return c
+
+
+@functools.lru_cache(maxsize=64)
+def _moments(n: int) -> np.ndarray:
+    """(m_2, m_4, …, m_2J), m_p = Σ_l cos^p(lπ/(n+1)): the even cosine moments (odd ones vanish), read-only."""
+    c2 = _cosines(n) ** 2
+    m = np.cumprod(np.broadcast_to(c2, (_N_SERIES, n)), axis=0).sum(axis=1)
+    m.flags.writeable = False
+    return m
+
+
+def _row_direct(a: np.ndarray, b: float, c: np.ndarray) -> tuple:
+    """F = Σ_l ln λ_l, λ_l = a − 2b·c_l, and ∂F/∂a, ∂F/∂b, ∂²F/∂a², ∂²F/∂a∂b, ∂²F/∂b² by direct sums over l."""
+    lam = a[:, None] - 2.0 * b * c[None, :]
+    r = 1.0 / lam
+    r2 = r * r
+    return (np.log(lam).sum(1), r.sum(1), -2.0 * (r @ c), -r2.sum(1), 2.0 * (r2 @ c), -4.0 * (r2 @ (c * c)))
+
+
+def _row_series(a: np.ndarray, b: float, m: np.ndarray, n_cols: int) -> tuple:
+    """The same six for ρ = 2b/a small: F = M ln a − Σ_j m_2j ρ^2j/(2j) (Taylor series of ln(1 − ρc))."""
+    rho = 2.0 * b / a
+    u = rho * rho
+    j = np.arange(1, len(m) + 1)
+    powers = u[:, None] ** (j - 1)[None, :]
+    g0, g1, g2 = (powers @ np.stack([m / (2 * j), m, (2 * j - 1) * m], axis=1)).T  # Σ m u^j/2j /u, Σ m u^(j−1), …
+    a2 = a * a
+    return (n_cols * np.log(a) - u * g0, (n_cols + u * g1) / a, -2.0 * rho * g1 / a,
+            (-n_cols - 2.0 * u * g1 - u * g2) / a2, 2.0 * rho * (g1 + g2) / a2, -4.0 * g2 / a2)
+
+
+def _cheb_real(d: np.ndarray, x: np.ndarray, n: int) -> np.ndarray:
+    """x = 1 + d = cosh t ≥ 1: (ln U_M, sinh t, K = n·coth nt − coth t, K' = n²csch²nt − csch²t), n = M + 1."""
+    t = np.log1p(d + np.sqrt(d * (d + 2.0)))
+    sh, q = np.sinh(t), np.exp(-2.0 * n * t)
+    en = -np.expm1(-2.0 * n * t)
+    return np.stack([(n - 1) * t + np.log(en) - np.log(-np.expm1(-2.0 * t)), sh, n * (1.0 + q) / en - x / sh,
+                     4.0 * n * n * q / en ** 2 - 1.0 / sh ** 2])
+
+
+def _cheb_trig(d: np.ndarray, n: int) -> np.ndarray:
+    """x = 1 + d = cos θ < 1: the same with t = iθ, (ln U_M, sin θ, cot θ − n·cot nθ, n²csc²nθ − csc²θ)."""
+    th = 2.0 * np.arcsin(np.sqrt(-d / 2.0))
+    sn, snn = np.sin(th), np.sin(n * th)
+    return np.stack([np.log(snn) - np.log(sn), sn, 1.0 / np.tan(th) - n / np.tan(n * th), (n / snn) ** 2 - 1.0 / sn ** 2])
+
+
+def _row_closed(a: np.ndarray, b: float, n_cols: int) -> tuple:
+    """The same six from U_M(x) = Π_l 2(x − c_l), x = a/2b = cosh t (or cos θ): ln U = ln sinh((M+1)t) − ln sinh t,
+    S1 = Σ 1/(x − c_l) = U'/U = K/sinh t, S2 = Σ 1/(x − c_l)² = −S1' (b > 0, (M+1)|t| ≥ 1, x ≤ 4)."""
+    n, x = n_cols + 1, a / (2.0 * b)
+    d = (a - 2.0 * b) / (2.0 * b)
+    real = d >= 0
+    if real.all():
+        u = _cheb_real(d, x, n)
+    elif not real.any():
+        u = _cheb_trig(d, n)
+    else:
+        u = np.empty((4, len(a)))
+        u[:, real], u[:, ~real] = _cheb_real(d[real], x[real], n), _cheb_trig(d[~real], n)
+    ln_u, sh, k, dk = u
+    s1 = k / sh
+    s2 = dk / sh ** 2 + np.where(real, k, -k) * x / sh ** 3
+    b2 = 4.0 * b * b
+    return (n_cols * math.log(b) + ln_u, s1 / (2.0 * b), -(x * s1 - n_cols) / b, -s2 / b2,
+            2.0 * (x * s2 - s1) / b2, -4.0 * (x * x * s2 - 2.0 * x * s1 + n_cols) / b2)
+
+
+def _row_sums(a: np.ndarray, beta_h: float, n_cols: int) -> tuple:
+    """F(a_k) = Σ_l ln(a_k − 2β_h c_l) and its derivatives for every row k, each row by the cheapest exact route."""
+    b = abs(beta_h)
+    if n_cols <= _DIRECT_COLS:
+        return _row_direct(a, beta_h, _cosines(n_cols))
+    out = np.empty((6, len(a)))
+    x = a / (2.0 * b) if b > 0 else np.full(len(a), np.inf)
+    series = x >= _X_SERIES
+    if series.any():
+        out[:, series] = _row_series(a[series], b, _moments(n_cols), n_cols)
+    rest = ~series
+    if rest.any():
+        near = rest & (np.abs(x - 1.0) * 2.0 * (n_cols + 1) ** 2 < 1.0)  # (M+1)|t| < 1: closed form cancels
+        far = rest & ~near
+        if far.any():
+            out[:, far] = _row_closed(a[far], b, n_cols)
+        if near.any():
+            out[:, near] = _row_direct(a[near], b, _cosines(n_cols))
+    if beta_h < 0:  # {c_l} is symmetric: F is even in β_h
+        out[[2, 4]] *= -1.0
+    return tuple(out)
+
+
+def _row_integral(a: np.ndarray, beta_h: float, n_cols: int) -> tuple:
+    """F = M·(1/2π)∫ ln(a − 2β_h cos ω)dω = M·ln((a + r)/2), r = √(a² − 4β_h²), and its derivatives."""
+    r = np.sqrt(a * a - 4.0 * beta_h * beta_h)
+    ar = a + r
+    fb = -4.0 * beta_h / (r * ar)
+    fbb = -4.0 / (r * ar) - 16.0 * beta_h ** 2 * (a + 2.0 * r) / (r ** 3 * ar ** 2)
+    return tuple(n_cols * q for q in (np.log(ar / 2.0), 1.0 / r, fb, -a / r ** 3, 4.0 * beta_h / r ** 3, fbb))
+
+
+def _log_det_derivs(shape, beta_h: float, beta_v: float, approximate: bool):
+    """(ln det A, ∇, ∇²) in (β_h, β_v): Σ_k w_k F(a_k, β_h) with a_k = 1 − 2β_v·c_k; exact: c_k = cos(kπ/(L+1)),
+    w_k = 1; approximate: midpoint nodes c_k = cos ω_k on [0, π], w_k = L/K (L·M times the large-grid integral)."""
+    rows, cols = shape
+    if approximate:
+        c, w = np.cos((np.arange(_QUAD) + 0.5) * np.pi / _QUAD), rows / _QUAD
+        f, fa, fb, faa, fab, fbb = _row_integral(1.0 - 2.0 * beta_v * c, beta_h, cols)
+    else:
+        c, w = _cosines(rows), 1.0
+        f, fa, fb, faa, fab, fbb = _row_sums(1.0 - 2.0 * beta_v * c, beta_h, cols)
+    grad = w * np.array([fb.sum(), -2.0 * (fa @ c)])
+    hvh = -2.0 * (fab @ c)
+    hess = w * np.array([[fbb.sum(), hvh], [hvh, 4.0 * (faa @ (c * c))]])
+    return w * float(f.sum()), grad, hess
+
+
+def log_det(shape, beta_h: float, beta_v: float, approximate: bool = False) -> float:
+    """ln det A = Σ_kl ln λ_kl (Eq. 14, notes A4), or with ``approximate`` L·M·(1/4π²)∬ ln(1 − 2β_h cos ω₁ −
+    2β_v cos ω₂)dω₁dω₂ (the large-grid limit, ref. [12]'s approximate ML; needs |β_h| + |β_v| < ½). Dimensionless."""
+    if not positive_definite(shape, beta_h, beta_v):
+        raise ParameterError(f"log_det: beta_h={beta_h}, beta_v={beta_v} do not give a positive definite A on a "
+                             f"{shape[0]}×{shape[1]} grid (need 2|beta_v|cos(π/(L+1)) + 2|beta_h|cos(π/(M+1)) < 1)")
+    if approximate and not abs(beta_h) + abs(beta_v) < 0.5:
+        raise ParameterError(f"log_det(approximate=True) needs |beta_h| + |beta_v| < 0.5, got {beta_h}, {beta_v}")
+    return _log_det_derivs(tuple(shape), float(beta_h), float(beta_v), approximate)[0]
+
+
+@dataclass(frozen=True)
+class GmrfParams:
+    """GMRF clutter parameters: β_h, β_v (dimensionless) and the prediction-error variance σ_c² (units²)."""
+    beta_h: float
+    beta_v: float
+    sigma_c2: float
+
+    @property
+    def sigma_c(self) -> float:
+        """σ_c = √σ_c² (units)."""
+        return math.sqrt(self.sigma_c2)
+
+
+def _feasible(shape, beta, approximate: bool) -> bool:
+    """β inside the region the estimator searches, with the safety margin MARGIN."""
+    if approximate:
+        return 1.0 - 2.0 * (abs(beta[0]) + abs(beta[1])) >= MARGIN
+    return _lambda_min(shape, beta[0], beta[1]) >= MARGIN
+
+
+def _profile(shape, sums, beta, approximate: bool):
+    """ℓ(β) = −(LM/2)·ln σ̂_c²(β) + ½ ln det A(β) (Eq. 13 profiled over σ_c²), its gradient and Hessian, and
+    σ̂_c²(β) = (S0 − 2β_h S_h − 2β_v S_v)/(LM) (notes B1)."""
+    n = shape[0] * shape[1]
+    s0, s = sums[0], np.array(sums[1:])
+    q = s0 - 2.0 * (beta @ s)
+    ld, g, h = _log_det_derivs(shape, beta[0], beta[1], approximate)
+    return -0.5 * n * math.log(q / n) + 0.5 * ld, n * s / q + 0.5 * g, 2.0 * n * np.outer(s, s) / q ** 2 + 0.5 * h, q / n
+
+
+def _check_frame(v) -> np.ndarray:
+    """v as a C-contiguous float64 2-D array with both sides ≥ 3, else ParameterError."""
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    if v.ndim != 2 or min(v.shape) < 3:
+        raise ParameterError(f"v must be a 2-D frame with both sides ≥ 3, got shape {v.shape}")
+    return v
+
+
+def estimate_gmrf(v, approximate: bool = False, start: GmrfParams | None = None) -> GmrfParams:
+    """Maximum-likelihood (β_h, β_v, σ_c²) of Eq. 13 for a mean-removed L×M frame v (notes B1): damped Newton on
+    ℓ(β) with the analytic gradient and Hessian, warm-started at ``start`` (or (0, 0), also when ``start`` lies
+    outside the search region), steps halved to stay in λ_min ≥ MARGIN (approximate: 1 − 2|β_h| − 2|β_v| ≥ MARGIN)
+    and to increase ℓ; stops when |Δβ| < 1e-7 or after 50 steps. A constant frame (S0 = 0) gives β = (0, 0) and
+    σ_c² = SIGMA2_FLOOR. ``approximate`` uses the large-grid log-determinant (ref. [12]'s AML)."""
+    v = _check_frame(v)
+    sums = lag_sums(v)
+    if not math.isfinite(sums[0]):
+        bad = "NaN or inf" if not np.isfinite(v).all() else "values so large that Σv² overflows"
+        raise ParameterError(f"v must be finite: it holds {bad}")
+    if sums[0] <= 0.0:
+        return GmrfParams(0.0, 0.0, SIGMA2_FLOOR)
+    shape = v.shape
+    beta = np.zeros(2) if start is None else np.array([start.beta_h, start.beta_v], dtype=np.float64)
+    if not (np.isfinite(beta).all() and _feasible(shape, beta, approximate)):
+        beta = np.zeros(2)
+    val, g, h, s2 = _profile(shape, sums, beta, approximate)
+    for _ in range(_MAX_ITER):
+        d = _newton_step(g, h, shape, beta, approximate)
+        step = 1.0
+        while True:
+            nb = beta + step * d
+            if _feasible(shape, nb, approximate):
+                new = _profile(shape, sums, nb, approximate)
+                if new[0] >= val + 1e-4 * step * (g @ d) or step * np.abs(d).max() < _TOL:
+                    break
+            step *= 0.5
+            if step * np.abs(d).max() < 1e-3 * _TOL:
+                return GmrfParams(float(beta[0]), float(beta[1]), max(s2, SIGMA2_FLOOR))
+        beta, (val, g, h, s2) = nb, new
+        if step * np.abs(d).max() < _TOL:
+            break
+    return GmrfParams(float(beta[0]), float(beta[1]), max(s2, SIGMA2_FLOOR))
+
+
+def _newton_step(g, h, shape, beta, approximate: bool) -> np.ndarray:
+    """Newton ascent direction −H⁻¹g; where H is not negative definite, −(½∇² ln det)⁻¹g (always ascent)."""
+    if not (h[0, 0] < 0 and np.linalg.det(h) > 0):
+        h = 0.5 * _log_det_derivs(shape, beta[0], beta[1], approximate)[2]
+    return -np.linalg.solve(h, g)
+
+
+def local_mean(frame, window: int) -> np.ndarray:
+    """The local mean (frame units) over a window×window box, reflecting at the border (the paper's local-mean
+    removal before the GMRF, §2.2): scipy.ndimage.uniform_filter(frame as float64, size=window, mode="reflect")."""
+    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 3 or window % 2 == 0:
+        raise ParameterError(f"window must be an odd integer ≥ 3, got {window!r}")
+    frame = np.asarray(frame, dtype=np.float64)
+    if frame.ndim != 2:
+        raise ParameterError(f"frame must be 2-D, got shape {frame.shape}")
+    return ndimage.uniform_filter(frame, size=int(window), mode="reflect")

@@ -231,6 +231,7 @@ class MethodSpec:
     extra_columns: Callable | None = None  # params -> columns its tracks rows carry after TRACK_COLUMNS
     bench_settings: Callable | None = None  # snr -> make_tracker keywords the bench uses (None: {"snr": snr})
     bench_scene: Mapping = field(default_factory=dict)  # the bench's simulate() keywords (targets, snr, motion)
+    bench_frames: Callable | None = None  # (shape, n_frames, seed) -> the bench's frames, instead of simulate()
 
     def __post_init__(self):
         if self.kind not in KINDS:

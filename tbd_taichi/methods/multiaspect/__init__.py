@@ -13,6 +13,12 @@ ASSUMES = ("one extended target at a time whose shapes are the templates (defaul
            "estimated every frame; the default image prior lets it be anywhere, moving ≤ 3 px/frame")
 
 
+def _bench_frames(shape, n_frames: int, seed: int):
+    from ...bruno2008 import bench_frames
+
+    return bench_frames(shape, n_frames, seed)
+
+
 def method_spec(kind: str, name: str, title: str, section: str, rank: int) -> MethodSpec:
     """The registry entry of filter ``kind`` (rs, apf)."""
     def factory(shape, params, *, seed: int, engine: str, arch, init_box=None, **options):
@@ -28,7 +34,7 @@ def method_spec(kind: str, name: str, title: str, section: str, rank: int) -> Me
         aliases={"particles": "n_particles"}, rank=rank,
         particle_count=lambda shape, params: particles(kind, params),
         extra_columns=lambda params: EXTRA_COLUMNS,
-        bench_settings=lambda snr: {"prior": "paper"},
+        bench_settings=lambda snr: {"prior": "paper"}, bench_frames=_bench_frames,
         assumes=ASSUMES)
 
 

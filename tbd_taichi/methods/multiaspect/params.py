@@ -52,8 +52,8 @@ class MultiaspectParams:
                         source="not in the paper", low=0, high=1000)
     mh_moves: int = param(1, doc="Metropolis–Hastings moves per frame (ma-rs)", source="§3.2, Eqs. 19–21", low=1,
                           high=100)
-    mean_window: int | None = param(None, doc="side of the local-mean window removed before the GMRF (auto: 4 "
-                                    "template sides + 1)", unit="px", source="§2 (\"suitable preprocessing\")",
+    mean_window: int | None = param(None, doc="side of the local-mean window removed before the GMRF (auto: 3 "
+                                    "template sides, made odd)", unit="px", source="§2 (\"suitable preprocessing\")",
                                     low=3, high=10001, optional=True)
     gmrf: str = param("estimate", doc="clutter parameters: estimate (maximum likelihood of Eq. 13 every frame) or "
                       "BH,BV,SIGMA_C fixed", symbol="β_h, β_v, σ_c", source="Eqs. 9, 13, 14")
@@ -124,7 +124,7 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
         p_absent = 0.0
     else:
         prior, p_absent = law_vector(grid, 0.0, 0.0, p.vmax), p.p_absent
-    window = p.mean_window or 4 * max(th, tw) + 1
+    window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")
     return Resolved(t, g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior, prior.copy(),
