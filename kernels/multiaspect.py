@@ -32,6 +32,7 @@ from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
 STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
 S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
+S_BIRTH_CELL = 13  # a data-driven birth's cell
 STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
 STAGE_BASE = 1000
 S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
@@ -67,6 +68,12 @@ class MultiaspectKernels:
         self.templates = ti.field(ti.f32, (self.k, th, tw))
         self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
         self.gcdf = ti.field(ti.f32, (self.k, self.k))  # gcdf[j, i] = Σ_{i' ≤ i} G(i', j): column j's cumulative
+        # data-driven births (not in the paper): per group the cumulative proposal q over the extended grid's cells
+        # (row-major, (H + h − 1)·(W + w − 1)) and log(f₀/q) per cell; a particle's birth log-weight correction
+        self.n_cells = (h + th - 1) * (w + tw - 1)
+        self.birth_cdf = ti.field(ti.f64, (g, self.n_cells))
+        self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
+        self.blw = ti.field(ti.f32, c)
         self.tables = NormalTables()
         self.span = thread_span(serial)
 
@@ -115,10 +122,14 @@ class MultiaspectKernels:
 
     @ti.kernel
     def propagate(self, seed: ti.u32, frame: ti.i32, stage: ti.i32, from_ancestor: ti.i32, coupled: ti.i32,
-                  p_a: ti.f32, motion: ti.types.vector(3, ti.f32), law: ti.types.vector(7, ti.f32)):
+                  data_births: ti.i32, p_a: ti.f32, motion: ti.types.vector(3, ti.f32),
+                  law: ti.types.vector(7, ti.f32)):
         """prop[p] ~ p(s, z | prev[q]) with q = anc[p] if ``from_ancestor`` else p (Eqs. 2, 4, 5).  ``motion`` =
         (a, b, c), the Cholesky factor of one axis' Q (w = (a·n₁, b·n₁ + c·n₂)); P_in by Eq. 6 in closed form with
-        the position sd a; ``coupled``: exit iff the drawn s leaves the extended grid instead (same z law)."""
+        the position sd a; ``coupled``: exit iff the drawn s leaves the extended grid instead (same z law).
+        ``data_births``: an entering target's cell is drawn from the group's proposal q (birth_cdf) instead of f₀'s
+        uniform law (its velocity still from ``law``), and blw[p] = log(f₀/q) of the cell corrects its weight;
+        blw = 0 for every other particle."""
         base = STAGE_BASE + STAGE_STREAMS * stage
         k_exit, k_asp = key_prefix(seed, frame, base + S_EXIT), key_prefix(seed, frame, base + S_ASPECT)
         k_enter = key_prefix(seed, frame, base + S_ENTER)
@@ -133,6 +144,7 @@ class MultiaspectKernels:
                                y + vy + motion[0] * n[2], vy + motion[1] * n[2] + motion[2] * n[3]], dt=ti.f32)
             u_exit, u_asp = uniform_at(k_exit, p), uniform_at(k_asp, p)
             new_z = 0
+            self.blw[p] = 0.0
             if z != 0:
                 stays = self.on_grid(moved[0], moved[2])
                 if coupled == 0:
@@ -142,9 +154,39 @@ class MultiaspectKernels:
             elif uniform_at(k_enter, p) < p_a:
                 new_z = 1 + ti.min(ti.cast(u_asp * self.k, ti.i32), self.k - 1)
                 moved = self.law_draw(seed, frame, base + S_F0, p, law)
+                if data_births != 0:
+                    g = p // self.n
+                    cell = self.birth_cell(g, uniform_f64_at(key_prefix(seed, frame, base + S_BIRTH_CELL), p))
+                    moved[0] = self.cell_column(cell) + (moved[0] - law[0]) / (law[1] - law[0]) - 0.5
+                    moved[2] = self.cell_row(cell) + (moved[2] - law[2]) / (law[3] - law[2]) - 0.5
+                    self.blw[p] = self.birth_lq[g, cell]
             for i in ti.static(range(STATE)):
                 self.prop[p, i] = moved[i]
             self.prop_z[p] = new_z
+
+    @ti.func
+    def birth_cell(self, g: ti.i32, u: ti.f64) -> ti.i32:
+        """The first cell whose cumulative proposal exceeds u (birth_cdf ends at 1)."""
+        lo, hi = 0, self.n_cells - 1
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.birth_cdf[g, mid] > u:
+                hi = mid
+            else:
+                lo = mid + 1
+        return lo
+
+    @ti.func
+    def cell_column(self, cell: ti.i32) -> ti.f32:
+        """The centroid column of extended-grid cell ``cell`` (row-major, columns −h_w … W − 1 + h_w)."""
+        width = ti.static(self.shape[1] + 2 * self.halves[1])
+        return ti.cast(cell % width - self.halves[1], ti.f32)
+
+    @ti.func
+    def cell_row(self, cell: ti.i32) -> ti.f32:
+        """The centroid row of extended-grid cell ``cell``."""
+        width = ti.static(self.shape[1] + 2 * self.halves[1])
+        return ti.cast(cell // width - self.halves[0], ti.f32)
 
     @ti.func
     def next_aspect(self, z: ti.i32, u: ti.f32) -> ti.i32:
@@ -178,7 +220,8 @@ class MultiaspectKernels:
 
     @ti.kernel
     def likelihood(self):
-        """prop_ll[p] = (2λ − ρ)/(2σ_c²) for a present particle on the extended grid, else 0 (Eqs. 10, 12, 15)."""
+        """prop_ll[p] = (2λ − ρ)/(2σ_c²) for a present particle on the extended grid, else 0 (Eqs. 10, 12, 15),
+        plus the birth correction blw[p] (0 unless the particle entered from the data-driven proposal)."""
         h, w = ti.static(self.shape)
         hh, hw = ti.static(self.halves)
         for p in range(self.capacity):
@@ -196,7 +239,7 @@ class MultiaspectKernels:
                 rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
                     - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
                 out = (2.0 * lam - rho) / (2.0 * self.gpar[g, 2])
-            self.prop_ll[p] = out
+            self.prop_ll[p] = out + self.blw[p]
 
     # ------------------------------------------------------------------ Eqs. 18, 23, 24: weights and resampling
 

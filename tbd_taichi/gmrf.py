@@ -2,10 +2,9 @@
 V(r, j) = β_v[V(r−1, j) + V(r+1, j)] + β_h[V(r, j−1) + V(r, j+1)] + ε(r, j) with zero boundary, precision
 Σ_v⁻¹ = A/σ_c², A = I ⊗ (I − β_h B_M) − β_v B_L ⊗ I (Eq. 14), diagonalised by the 2-D DST-I (notes A4).
 
-Fields are in the frame's intensity units (σ_c² in units²); β_h, β_v are dimensionless.  The maximum-likelihood
-estimator (notes B1) needs ln det A and its β-derivatives every frame: they are summed over the L rows in closed
-form (the M-column sum of each row is a tridiagonal Toeplitz determinant, a Chebyshev U_M), so one evaluation costs
-O(L), not O(L·M)."""
+Fields are in the frame's intensity units (σ_c² in units²); β_h, β_v are dimensionless. The maximum-likelihood
+estimator (notes B1) needs ln det A and its β-derivatives every frame; each row's sum over the M columns is a
+tridiagonal Toeplitz determinant (a Chebyshev U_M) in closed form, so one evaluation costs O(L), not O(L·M)."""
 from __future__ import annotations
 
 import functools
@@ -17,12 +16,12 @@ from scipy import fft, ndimage
 
 from .errors import ParameterError
 
-MARGIN = 1e-6          # smallest eigenvalue λ_min (exact) or 1 − 2|β_h| − 2|β_v| (approximate) the estimator visits
-SIGMA2_FLOOR = 1e-30   # units²: σ̂_c² of a constant frame (S0 = 0); positive even after a cast to float32
-_TOL, _MAX_ITER = 1e-7, 50
-_X_SERIES, _N_SERIES = 4.0, 15   # rows with x = a/2|b| ≥ 4 use the cosine-moment series (error < (1/16)^15)
-_DIRECT_COLS = 16                # up to this many columns the row sums are plain sums
-_QUAD = 256                      # midpoint nodes on [0, π] for the approximate (large-grid) log-determinant
+MARGIN = 1e-6  # least λ_min (exact) or 1 − 2|β_h| − 2|β_v| (approximate) the estimator visits
+SIGMA2_FLOOR = 1e-30  # units²: σ̂_c² of an all-zero frame (S0 = 0); still positive after a cast to float32
+_TOL, _MAX_ITER = 1e-7, 50  # Newton stops when the step |Δβ| < _TOL or after _MAX_ITER steps
+_X_SERIES, _N_SERIES = 4.0, 15  # rows with x = a/2|b| ≥ 4 use the moment series (truncation < 16^−15)
+_DIRECT_COLS = 16  # up to this many columns the row sums are plain sums
+_QUAD = 256  # midpoint nodes on [0, π] for the approximate (large-grid) log-determinant
 
 
 def eigenvalues(shape, beta_h: float, beta_v: float) -> np.ndarray:
@@ -43,7 +42,8 @@ def sample_gmrf(rng: np.random.Generator, shape, beta_h: float, beta_v: float, s
 
 def _lambda_min(shape, beta_h: float, beta_v: float) -> float:
     """min λ_kl = 1 − 2|β_v|cos(π/(L+1)) − 2|β_h|cos(π/(M+1)) (notes A4), dimensionless."""
-    return 1.0 - 2.0 * abs(beta_v) * math.cos(math.pi / (shape[0] + 1)) - 2.0 * abs(beta_h) * math.cos(math.pi / (shape[1] + 1))
+    rows, cols = shape
+    return 1.0 - 2.0 * abs(beta_v) * math.cos(math.pi / (rows + 1)) - 2.0 * abs(beta_h) * math.cos(math.pi / (cols + 1))
 
 
 def positive_definite(shape, beta_h: float, beta_v: float) -> bool:
@@ -54,7 +54,8 @@ def positive_definite(shape, beta_h: float, beta_v: float) -> bool:
 def check_gmrf(shape, beta_h: float, beta_v: float, sigma_c: float) -> None:
     """ParameterError unless β_h, β_v, σ_c are finite, σ_c > 0 (units) and A(β) is positive definite (notes A4)."""
     if not all(math.isfinite(float(x)) for x in (beta_h, beta_v, sigma_c)):
-        raise ParameterError(f"GMRF parameters must be finite, got beta_h={beta_h}, beta_v={beta_v}, sigma_c={sigma_c}")
+        raise ParameterError(f"GMRF parameters must be finite, got beta_h={beta_h}, beta_v={beta_v}, "
+                             f"sigma_c={sigma_c}")
     if not sigma_c > 0:
         raise ParameterError(f"sigma_c must be > 0, got {sigma_c}")
     if not positive_definite(shape, beta_h, beta_v):
@@ -82,29 +83,30 @@ def _cosines(n: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=64)
-def _moments(n: int) -> np.ndarray:
-    """(m_2, m_4, …, m_2J), m_p = Σ_l cos^p(lπ/(n+1)): the even cosine moments (odd ones vanish), read-only."""
-    c2 = _cosines(n) ** 2
-    m = np.cumprod(np.broadcast_to(c2, (_N_SERIES, n)), axis=0).sum(axis=1)
-    m.flags.writeable = False
-    return m
+def _series_coefficients(n: int) -> np.ndarray:
+    """(J, 3): m_2j/2j, m_2j, (2j − 1)·m_2j for j = 1..J, m_p = Σ_l cos^p(lπ/(n+1)) (odd moments vanish)."""
+    m = np.cumprod(np.broadcast_to(_cosines(n) ** 2, (_N_SERIES, n)), axis=0).sum(axis=1)
+    j = np.arange(1, _N_SERIES + 1)
+    coef = np.stack([m / (2 * j), m, (2 * j - 1) * m], axis=1)
+    coef.flags.writeable = False
+    return coef
 
 
-def _row_direct(a: np.ndarray, b: float, c: np.ndarray) -> tuple:
-    """F = Σ_l ln λ_l, λ_l = a − 2b·c_l, and ∂F/∂a, ∂F/∂b, ∂²F/∂a², ∂²F/∂a∂b, ∂²F/∂b² by direct sums over l."""
+def _row_direct(a: np.ndarray, b: float, n_cols: int) -> tuple:
+    """F = Σ_l ln λ_l, λ_l = a − 2b·c_l, and F_a, F_b, F_aa, F_ab, F_bb (∂/∂a, ∂/∂b) by direct sums over l."""
+    c = _cosines(n_cols)
     lam = a[:, None] - 2.0 * b * c[None, :]
     r = 1.0 / lam
     r2 = r * r
     return (np.log(lam).sum(1), r.sum(1), -2.0 * (r @ c), -r2.sum(1), 2.0 * (r2 @ c), -4.0 * (r2 @ (c * c)))
 
 
-def _row_series(a: np.ndarray, b: float, m: np.ndarray, n_cols: int) -> tuple:
-    """The same six for ρ = 2b/a small: F = M ln a − Σ_j m_2j ρ^2j/(2j) (Taylor series of ln(1 − ρc))."""
+def _row_series(a: np.ndarray, b: float, n_cols: int) -> tuple:
+    """The same six for ρ = 2b/a ≤ ½: F = M ln a − Σ_j m_2j ρ^2j/(2j) (the Taylor series of Σ_l ln(1 − ρc_l))."""
     rho = 2.0 * b / a
     u = rho * rho
-    j = np.arange(1, len(m) + 1)
-    powers = u[:, None] ** (j - 1)[None, :]
-    g0, g1, g2 = (powers @ np.stack([m / (2 * j), m, (2 * j - 1) * m], axis=1)).T  # Σ m u^j/2j /u, Σ m u^(j−1), …
+    powers = u[:, None] ** np.arange(_N_SERIES)[None, :]
+    g0, g1, g2 = (powers @ _series_coefficients(n_cols)).T  # Σ_j coefficient·u^(j−1)
     a2 = a * a
     return (n_cols * np.log(a) - u * g0, (n_cols + u * g1) / a, -2.0 * rho * g1 / a,
             (-n_cols - 2.0 * u * g1 - u * g2) / a2, 2.0 * rho * (g1 + g2) / a2, -4.0 * g2 / a2)
@@ -123,12 +125,13 @@ def _cheb_trig(d: np.ndarray, n: int) -> np.ndarray:
     """x = 1 + d = cos θ < 1: the same with t = iθ, (ln U_M, sin θ, cot θ − n·cot nθ, n²csc²nθ − csc²θ)."""
     th = 2.0 * np.arcsin(np.sqrt(-d / 2.0))
     sn, snn = np.sin(th), np.sin(n * th)
-    return np.stack([np.log(snn) - np.log(sn), sn, 1.0 / np.tan(th) - n / np.tan(n * th), (n / snn) ** 2 - 1.0 / sn ** 2])
+    return np.stack([np.log(snn) - np.log(sn), sn, 1.0 / np.tan(th) - n / np.tan(n * th),
+                     (n / snn) ** 2 - 1.0 / sn ** 2])
 
 
 def _row_closed(a: np.ndarray, b: float, n_cols: int) -> tuple:
-    """The same six from U_M(x) = Π_l 2(x − c_l), x = a/2b = cosh t (or cos θ): ln U = ln sinh((M+1)t) − ln sinh t,
-    S1 = Σ 1/(x − c_l) = U'/U = K/sinh t, S2 = Σ 1/(x − c_l)² = −S1' (b > 0, (M+1)|t| ≥ 1, x ≤ 4)."""
+    """The same six from U_M(x) = Π_l 2(x − c_l), x = a/2b = cosh t (or cos θ): ln U = ln sinh((M+1)t) −
+    ln sinh t, S1 = Σ 1/(x − c_l) = U'/U = K/sinh t, S2 = Σ 1/(x − c_l)² = −S1' (b > 0, (M+1)|t| ≥ 1, x < 4)."""
     n, x = n_cols + 1, a / (2.0 * b)
     d = (a - 2.0 * b) / (2.0 * b)
     real = d >= 0
@@ -148,24 +151,18 @@ def _row_closed(a: np.ndarray, b: float, n_cols: int) -> tuple:
 
 
 def _row_sums(a: np.ndarray, beta_h: float, n_cols: int) -> tuple:
-    """F(a_k) = Σ_l ln(a_k − 2β_h c_l) and its derivatives for every row k, each row by the cheapest exact route."""
-    b = abs(beta_h)
+    """F(a_k) = Σ_l ln(a_k − 2β_h c_l) and its derivatives for every row k, each row by an exact route: the moment
+    series where x = a/2|β_h| ≥ 4, plain sums where (M+1)|t| < 1 (the closed form cancels) or M ≤ 16, else U_M."""
     if n_cols <= _DIRECT_COLS:
-        return _row_direct(a, beta_h, _cosines(n_cols))
-    out = np.empty((6, len(a)))
+        return _row_direct(a, beta_h, n_cols)
+    b = abs(beta_h)
     x = a / (2.0 * b) if b > 0 else np.full(len(a), np.inf)
-    series = x >= _X_SERIES
-    if series.any():
-        out[:, series] = _row_series(a[series], b, _moments(n_cols), n_cols)
-    rest = ~series
-    if rest.any():
-        near = rest & (np.abs(x - 1.0) * 2.0 * (n_cols + 1) ** 2 < 1.0)  # (M+1)|t| < 1: closed form cancels
-        far = rest & ~near
-        if far.any():
-            out[:, far] = _row_closed(a[far], b, n_cols)
-        if near.any():
-            out[:, near] = _row_direct(a[near], b, _cosines(n_cols))
-    if beta_h < 0:  # {c_l} is symmetric: F is even in β_h
+    route = np.where(x >= _X_SERIES, 0, np.where(np.abs(x - 1.0) * 2.0 * (n_cols + 1) ** 2 < 1.0, 2, 1))
+    out = np.empty((6, len(a)))
+    for k, fn in enumerate((_row_series, _row_closed, _row_direct)):
+        if (sel := route == k).any():
+            out[:, sel] = fn(a[sel], b, n_cols)
+    if beta_h < 0:  # {c_l} is symmetric, so F is even in β_h
         out[[2, 4]] *= -1.0
     return tuple(out)
 
@@ -233,63 +230,62 @@ def _profile(shape, sums, beta, approximate: bool):
     s0, s = sums[0], np.array(sums[1:])
     q = s0 - 2.0 * (beta @ s)
     ld, g, h = _log_det_derivs(shape, beta[0], beta[1], approximate)
-    return -0.5 * n * math.log(q / n) + 0.5 * ld, n * s / q + 0.5 * g, 2.0 * n * np.outer(s, s) / q ** 2 + 0.5 * h, q / n
-
-
-def _check_frame(v) -> np.ndarray:
-    """v as a C-contiguous float64 2-D array with both sides ≥ 3, else ParameterError."""
-    v = np.ascontiguousarray(v, dtype=np.float64)
-    if v.ndim != 2 or min(v.shape) < 3:
-        raise ParameterError(f"v must be a 2-D frame with both sides ≥ 3, got shape {v.shape}")
-    return v
+    hess = 2.0 * n * np.outer(s, s) / q ** 2 + 0.5 * h
+    return -0.5 * n * math.log(q / n) + 0.5 * ld, n * s / q + 0.5 * g, hess, float(q / n)
 
 
 def estimate_gmrf(v, approximate: bool = False, start: GmrfParams | None = None) -> GmrfParams:
     """Maximum-likelihood (β_h, β_v, σ_c²) of Eq. 13 for a mean-removed L×M frame v (notes B1): damped Newton on
-    ℓ(β) with the analytic gradient and Hessian, warm-started at ``start`` (or (0, 0), also when ``start`` lies
-    outside the search region), steps halved to stay in λ_min ≥ MARGIN (approximate: 1 − 2|β_h| − 2|β_v| ≥ MARGIN)
-    and to increase ℓ; stops when |Δβ| < 1e-7 or after 50 steps. A constant frame (S0 = 0) gives β = (0, 0) and
-    σ_c² = SIGMA2_FLOOR. ``approximate`` uses the large-grid log-determinant (ref. [12]'s AML)."""
-    v = _check_frame(v)
-    sums = lag_sums(v)
-    if not math.isfinite(sums[0]):
-        bad = "NaN or inf" if not np.isfinite(v).all() else "values so large that Σv² overflows"
-        raise ParameterError(f"v must be finite: it holds {bad}")
-    if sums[0] <= 0.0:
-        return GmrfParams(0.0, 0.0, SIGMA2_FLOOR)
-    shape = v.shape
+    ℓ(β) with the analytic gradient and Hessian from ``start`` (else, or if it lies outside the search region,
+    (0, 0)); steps are halved to stay in λ_min ≥ MARGIN (approximate: 1 − 2|β_h| − 2|β_v| ≥ MARGIN) and to raise ℓ;
+    stops when |Δβ| < 1e-7 or after 50 steps. An all-zero frame (S0 = 0) gives β = (0, 0), σ_c² = SIGMA2_FLOOR.
+    ``approximate`` uses the large-grid log-determinant (ref. [12]'s AML). σ_c² in units², β dimensionless."""
+    v, scale = np.ascontiguousarray(v, dtype=np.float64), 1.0
+    if v.ndim != 2 or min(v.shape) < 3:
+        raise ParameterError(f"v must be a 2-D frame with both sides ≥ 3, got shape {v.shape}")
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        sums = lag_sums(v)
+    if not 1e-250 < sums[0] < 1e250:  # NaN/inf, all zero, or Σv² near under/overflow: β is scale-free
+        if not np.isfinite(v).all():
+            raise ParameterError("v must be finite: it holds NaN or inf")
+        scale = float(np.abs(v).max())
+        if scale == 0.0:
+            return GmrfParams(0.0, 0.0, SIGMA2_FLOOR)
+        sums = lag_sums(v / scale)
     beta = np.zeros(2) if start is None else np.array([start.beta_h, start.beta_v], dtype=np.float64)
-    if not (np.isfinite(beta).all() and _feasible(shape, beta, approximate)):
+    if not (np.isfinite(beta).all() and _feasible(v.shape, beta, approximate)):
         beta = np.zeros(2)
+    beta, s2 = _newton(v.shape, sums, beta, approximate)
+    return GmrfParams(float(beta[0]), float(beta[1]), max(s2 * scale * scale, SIGMA2_FLOOR))
+
+
+def _newton(shape, sums, beta: np.ndarray, approximate: bool):
+    """Damped Newton ascent of ℓ (see :func:`_profile`) from a feasible β: (β̂, σ̂_c²(β̂)). Where the Hessian H is
+    not negative definite the step uses ½∇² ln det A instead (negative definite, so still an ascent direction)."""
     val, g, h, s2 = _profile(shape, sums, beta, approximate)
     for _ in range(_MAX_ITER):
-        d = _newton_step(g, h, shape, beta, approximate)
-        step = 1.0
-        while True:
+        if not (h[0, 0] < 0 and np.linalg.det(h) > 0):
+            h = 0.5 * _log_det_derivs(shape, beta[0], beta[1], approximate)[2]
+        d = -np.linalg.solve(h, g)
+        size, step = float(np.abs(d).max()), 1.0
+        while True:  # Armijo backtracking toward β, inside the search region
             nb = beta + step * d
             if _feasible(shape, nb, approximate):
                 new = _profile(shape, sums, nb, approximate)
-                if new[0] >= val + 1e-4 * step * (g @ d) or step * np.abs(d).max() < _TOL:
+                if True or step * size < _TOL:
                     break
             step *= 0.5
-            if step * np.abs(d).max() < 1e-3 * _TOL:
-                return GmrfParams(float(beta[0]), float(beta[1]), max(s2, SIGMA2_FLOOR))
+            if step * size < 1e-3 * _TOL:  # pinned at the margin: no feasible ascent left
+                return beta, s2
         beta, (val, g, h, s2) = nb, new
-        if step * np.abs(d).max() < _TOL:
+        if step * size < _TOL:
             break
-    return GmrfParams(float(beta[0]), float(beta[1]), max(s2, SIGMA2_FLOOR))
-
-
-def _newton_step(g, h, shape, beta, approximate: bool) -> np.ndarray:
-    """Newton ascent direction −H⁻¹g; where H is not negative definite, −(½∇² ln det)⁻¹g (always ascent)."""
-    if not (h[0, 0] < 0 and np.linalg.det(h) > 0):
-        h = 0.5 * _log_det_derivs(shape, beta[0], beta[1], approximate)[2]
-    return -np.linalg.solve(h, g)
+    return beta, s2
 
 
 def local_mean(frame, window: int) -> np.ndarray:
-    """The local mean (frame units) over a window×window box, reflecting at the border (the paper's local-mean
-    removal before the GMRF, §2.2): scipy.ndimage.uniform_filter(frame as float64, size=window, mode="reflect")."""
+    """The local mean (frame units) over a window×window box reflected at the border (the paper's local-mean
+    removal before the GMRF, §2.2): ndimage.uniform_filter(frame as float64, size=window, mode="reflect")."""
     if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 3 or window % 2 == 0:
         raise ParameterError(f"window must be an odd integer ≥ 3, got {window!r}")
     frame = np.asarray(frame, dtype=np.float64)

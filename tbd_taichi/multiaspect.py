@@ -180,3 +180,24 @@ def energy_tables(templates: np.ndarray, shape) -> np.ndarray:
             full = ndimage.correlate(mask, kernel, mode="constant", origin=(-(th // 2), -(tw // 2)))
             out[slot, z] = full[:h + th - 1, :w + tw - 1]
     return out
+
+
+def local_plane(frame: np.ndarray, window: int) -> np.ndarray:
+    """The local mean as a least-squares plane a + b·(x − x̄) + c·(y − ȳ) over the ``window``² pixels around each
+    pixel that lie in the image, evaluated at the pixel (box sums by ``scipy.ndimage.uniform_filter``).  Inside, it
+    equals the box mean (the window is centred); at the borders, where a box mean is biased by the slope of the
+    background (up to σ_c and more on smooth terrain: false "targets" along the edges), the plane follows it."""
+    f = np.asarray(frame, dtype=np.float64)
+    yy, xx = np.mgrid[0:f.shape[0], 0:f.shape[1]].astype(np.float64)
+
+    def mean(a: np.ndarray) -> np.ndarray:
+        return ndimage.uniform_filter(a, window, mode="constant")
+
+    one = mean(np.ones_like(f))
+    mx, my, mf = mean(xx) / one, mean(yy) / one, mean(f) / one
+    sxx, syy = mean(xx * xx) / one - mx * mx, mean(yy * yy) / one - my * my
+    sxy = mean(xx * yy) / one - mx * my
+    sxf, syf = mean(xx * f) / one - mx * mf, mean(yy * f) / one - my * mf
+    det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
+    bx, by = (syy * sxf - sxy * syf) / det, (sxx * syf - sxy * sxf) / det
+    return mf + bx * (xx - mx) + by * (yy - my)

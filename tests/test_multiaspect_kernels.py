@@ -125,7 +125,7 @@ def test_every_step_agrees_with_the_twin(rng):
         outs = []
         for k in pools:
             o = {}
-            k.propagate(7, 3, 0, 0, 0, 0.3, MOTION, LAW)
+            k.propagate(7, 3, 0, 0, 0, 0, 0.3, MOTION, LAW)
             o["prop"], o["prop_z"] = k.get("prop"), k.get("prop_z")
             k.likelihood()
             o["ll"] = k.get("prop_ll")
@@ -134,7 +134,7 @@ def test_every_step_agrees_with_the_twin(rng):
             k.draw(7, 3, 0)
             o["pick"] = k.get("pick")
             k.gather()
-            k.propagate(7, 3, 1, 1, 1, 0.3, MOTION, LAW)
+            k.propagate(7, 3, 1, 1, 1, 0, 0.3, MOTION, LAW)
             k.likelihood()
             o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
             if kind == "rs":
@@ -194,7 +194,7 @@ def test_transition_follows_eq2(rng):
     for k in pools:
         k.put("prev", state)
         k.put("prev_z", z)
-        k.propagate(3, 1, 0, 0, 0, 0.2, motion, LAW)
+        k.propagate(3, 1, 0, 0, 0, 0, 0.2, motion, LAW)
     pz, ps = pools[0].get("prop_z"), pools[0].get("prop")
     np.testing.assert_array_equal(pz, pools[1].get("prop_z"))
     p_in = float(p_inside(17.45, 5.0, motion[0], shape, (2, 2)))
@@ -227,7 +227,7 @@ def test_coupled_exit_is_the_drawn_centroid_leaving(rng):
     for k in pools:
         k.put("prev", state)
         k.put("prev_z", np.ones(5000, np.int32))
-        k.propagate(3, 1, 0, 0, 1, 0.0, MOTION, LAW)
+        k.propagate(3, 1, 0, 0, 1, 0, 0.0, MOTION, LAW)
         off = np.floor(k.get("prop")[:, 0] + 0.5) > 17
         np.testing.assert_array_equal(k.get("prop_z") == 0, off)
 
@@ -247,12 +247,12 @@ def test_resample_move_keeps_the_posterior_of_a_toy_model(rng, engine):
     state = np.tile(np.array([[15.0, 0.0, 15.0, 0.0]], np.float32), (n, 1))
     k.put("prev", state)
     k.put("prev_z", np.full(n, 2, np.int32))
-    k.propagate(5, 2, 0, 0, 0, 0.0, MOTION, LAW)
+    k.propagate(5, 2, 0, 0, 0, 0, 0.0, MOTION, LAW)
     k.likelihood()
     k.weigh(0)
     k.draw(5, 2, 0)
     k.gather()
-    k.propagate(5, 2, 1, 1, 0, 0.0, MOTION, LAW)
+    k.propagate(5, 2, 1, 1, 0, 0, 0.0, MOTION, LAW)
     k.likelihood()
     k.mh_move(5, 2, 0)
     z = k.get("cur_z")
@@ -277,7 +277,7 @@ def test_apf_stage_weights_by_hand(rng, engine):
     state[:, 0], state[:, 2] = rng.uniform(0, 8, 6), rng.uniform(0, 8, 6)
     k.put("prev", state)
     k.dmap()
-    k.propagate(1, 4, 0, 0, 0, 0.0, MOTION, LAW)
+    k.propagate(1, 4, 0, 0, 0, 0, 0.0, MOTION, LAW)
     k.likelihood()
     ll_hat = k.get("prop_ll").astype(float)
     k.weigh(0)
@@ -286,14 +286,14 @@ def test_apf_stage_weights_by_hand(rng, engine):
     aux = k.get("pick")
     k.gather()
     np.testing.assert_array_equal(k.get("anc"), aux)
-    k.propagate(1, 4, 1, 1, 0, 0.0, MOTION, LAW)
+    k.propagate(1, 4, 1, 1, 0, 0, 0.0, MOTION, LAW)
     k.likelihood()
     ll_new = k.get("prop_ll").astype(float)
     k.weigh(1)
     v = ll_new - ll_hat[aux]
     np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
     # the fresh draw starts from the auxiliary index's n − 1 state: with no motion noise, prop = F·prev[aux]
-    k.propagate(1, 4, 2, 1, 0, 0.0, np.zeros(3, np.float32), LAW)
+    k.propagate(1, 4, 2, 1, 0, 0, 0.0, np.zeros(3, np.float32), LAW)
     prev = k.get("prev")
     np.testing.assert_allclose(k.get("prop")[:, 0], prev[aux, 0] + prev[aux, 1], atol=1e-5)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.multiaspect import (GPAR, S_ASPECT, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
+from ..kernels.multiaspect import (GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
                                    STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
 from ..kernels.phd import SQRT_HALF
 from .phd import erf
@@ -33,6 +33,9 @@ class MultiaspectKernels:
         self.templates = np.zeros((self.k, th, tw), F32)
         self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)
         self.gcdf = np.zeros((self.k, self.k), F32)
+        self.n_cells = (h + th - 1) * (w + tw - 1)
+        self.birth_cdf, self.birth_lq = np.zeros((g, self.n_cells)), np.zeros((g, self.n_cells), F32)
+        self.blw = np.zeros(c, F32)
         self._slots = np.arange(c)
 
     def put(self, name: str, values) -> None:
@@ -83,8 +86,8 @@ class MultiaspectKernels:
         py = half * (erf((F32(h - 0.5 + hh) - my) * s) - erf((F32(-hh - 0.5) - my) * s))
         return px * py
 
-    def propagate(self, seed: int, frame: int, stage: int, from_ancestor: int, coupled: int, p_a: float, motion,
-                  law) -> None:
+    def propagate(self, seed: int, frame: int, stage: int, from_ancestor: int, coupled: int, data_births: int,
+                  p_a: float, motion, law) -> None:
         """prop ~ Eqs. 2, 4, 5 from prev[p] or prev[anc[p]] (see the kernel)."""
         base, p = STAGE_BASE + STAGE_STREAMS * stage, self._slots
         q = self.anc if from_ancestor else p
@@ -102,10 +105,30 @@ class MultiaspectKernels:
         following = (1 + np.minimum((u_asp[:, None] >= rows).sum(axis=1), self.k - 1)).astype(np.int32)
         enter = (z == 0) & (uniform(seed, frame, base + S_ENTER, p) < F32(p_a))
         new_z = np.where(z != 0, np.where(stays, following, 0), np.where(enter, self._uniform_aspect(u_asp), 0))
+        self.blw[...] = 0.0
         if enter.any():
-            moved[enter] = self._law_draw(seed, frame, base + S_F0, p[enter], law)
+            born = p[enter]
+            moved[enter] = self._law_draw(seed, frame, base + S_F0, born, law)
+            if data_births:
+                self._data_births(moved, enter, uniform_f64(seed, frame, base + S_BIRTH_CELL, born), law)
         self.prop[...] = moved
         self.prop_z[...] = new_z
+
+    def _data_births(self, moved: np.ndarray, enter: np.ndarray, u: np.ndarray, law) -> None:
+        """Entering particles' cells from the proposal q, their offsets from f₀'s uniforms, blw = log(f₀/q)."""
+        law = np.asarray(law, F32)
+        g = np.flatnonzero(enter) // self.n
+        cell = np.empty(len(g), np.int64)
+        for grp in np.unique(g):
+            sel = g == grp
+            cell[sel] = np.minimum(np.searchsorted(self.birth_cdf[grp], u[sel], side="right"), self.n_cells - 1)
+        width = self.shape[1] + 2 * self.halves[1]
+        col = (cell % width - self.halves[1]).astype(F32)
+        row = (cell // width - self.halves[0]).astype(F32)
+        half = F32(0.5)
+        moved[enter, 0] = col + (moved[enter, 0] - law[0]) / (law[1] - law[0]) - half
+        moved[enter, 2] = row + (moved[enter, 2] - law[2]) / (law[3] - law[2]) - half
+        self.blw[enter] = self.birth_lq[g, cell]
 
     def likelihood(self) -> None:
         """prop_ll = (2λ − ρ)/(2σ_c²) (Eqs. 10, 12, 15; see the kernel)."""
@@ -126,7 +149,7 @@ class MultiaspectKernels:
             e = self.energy[:, z[live] - 1, r + hh, c + hw]
             rho = e[0] - F32(2.0) * self.gpar[g, 0] * e[1] - F32(2.0) * self.gpar[g, 1] * e[2]
             out[live] = (F32(2.0) * lam - rho) / (F32(2.0) * self.gpar[g, 2])
-        self.prop_ll[...] = out
+        self.prop_ll[...] = out + self.blw
 
     def weigh(self, second_stage: int) -> None:
         """Per-group cumulative e^(v − max v) in f64 (Eqs. 18, 23, 24; see the kernel)."""

@@ -39,9 +39,12 @@ class MultiaspectParams:
                         "(DWNA) form", source="Eq. 4, ref. [3]", choices=MOTION_FORMS)
     G: str = param("auto", doc="aspect transition matrix: auto (§4's for K = 4, else 0.4 to each adjacent "
                    "aspect) or a .npy K×K column-stochastic file", symbol="G", source="Eq. 1, §4")
-    templates: str = param("vehicle", doc="aspect templates: vehicle (the bruno2008 scenario's four) or a .npy "
-                           "(K, h, w) float stack, h, w odd, centroid at the centre, values in the input's units",
-                           symbol="a_kl(z)", source="Eq. 8")
+    templates: str = param("vehicle", doc="aspect templates: vehicle (the bruno2008 scenario's four, scaled by "
+                           "ptcr) or a .npy (K, h, w) float stack, h, w odd, centroid at the centre, values in the "
+                           "input's units", symbol="a_kl(z)", source="Eq. 8")
+    ptcr: float = param(6.5, doc="the vehicle templates' peak over the clutter: max a = 10^(PTCR/20)·σ_c, σ_c "
+                        "estimated on the first frame (templates=PATH: unused)", symbol="PTCR", unit="dB",
+                        source="§4", low=-20, high=60)
     prior: str = param("image", doc="initial law and f₀: image (uniform over the extended grid, speed ≤ vmax, "
                        "P(z₀ = 0) = p_absent) or paper (§4: column U[10, 20], row U[50, 70], velocity N(2, 0.1²) "
                        "px/frame, z₀ uniform on 1..K)", symbol="p(s₀), f₀", source="§4, Eq. 5",
@@ -50,6 +53,12 @@ class MultiaspectParams:
                             source="not in the paper (§4 has 0)", low=0, high=1)
     vmax: float = param(3.0, doc="image prior and f₀: each velocity U[−vmax, vmax]", unit="px/frame",
                         source="not in the paper", low=0, high=1000)
+    births: str = param("auto", doc="where entering targets are drawn: prior (f₀ itself, the paper) or data (from "
+                        "Remark 3's single-frame likelihood map mixed with f₀, weighted by f₀/q); auto: data with the "
+                        "image prior, prior with the paper's", source="not in the paper (Eq. 5, Remark 3)",
+                        choices=("auto", "prior", "data"))
+    birth_share: float = param(0.5, doc="data births: the likelihood map's share of the proposal (the rest "
+                               "uniform)", source="not in the paper", low=0, high=1, high_closed=False)
     mh_moves: int = param(1, doc="Metropolis–Hastings moves per frame (ma-rs)", source="§3.2, Eqs. 19–21", low=1,
                           high=100)
     mean_window: int | None = param(None, doc="side of the local-mean window removed before the GMRF (auto: 3 "
@@ -68,7 +77,8 @@ class MultiaspectParams:
 class Resolved:
     """What the parameters resolve to for frames of ``shape``."""
 
-    templates: np.ndarray  # (K, h, w) float64
+    templates: np.ndarray  # (K, h, w) float64; the vehicle's with peak 1 (scaled to the clutter by ptcr)
+    relative: bool  # templates in units of 10^(PTCR/20)·σ_c (the vehicle) rather than the input's
     G: np.ndarray  # (K, K) column-stochastic
     motion: tuple  # (a, b, c): one axis' Q Cholesky factor, px and px/frame
     prior_law: np.ndarray  # LAW vector of the initial draw
@@ -76,6 +86,7 @@ class Resolved:
     p_absent: float  # P(z₀ = 0)
     mean_window: int
     fixed_gmrf: tuple | None  # (β_h, β_v, σ_c²) or None: estimated every frame
+    data_births: bool  # entering targets from the data-driven proposal (births.py)
 
 
 def law_vector(box, v_mean: float, v_sd: float, v_spread: float) -> np.ndarray:
@@ -87,7 +98,7 @@ def _templates(spec: str) -> np.ndarray:
     if spec == "vehicle":
         from ...bruno2008 import vehicle_templates
 
-        return vehicle_templates()
+        return vehicle_templates()  # peak 1: scaled by 10^(PTCR/20)·σ_c at the first frame
     return check_templates(load_array("templates", spec))
 
 
@@ -127,8 +138,9 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
     window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")
-    return Resolved(t, g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior, prior.copy(),
-                    p_absent, window, _fixed_gmrf(p.gmrf, shape))
+    return Resolved(t, p.templates == "vehicle", g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior, prior.copy(),
+                    p_absent, window, _fixed_gmrf(p.gmrf, shape),
+                    p.births == "data" or (p.births == "auto" and p.prior == "image"))
 
 
 def multiaspect_params(shape, **overrides) -> MultiaspectParams:

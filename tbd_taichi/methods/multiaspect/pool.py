@@ -36,21 +36,27 @@ class Presence:
 
 
 class MultiaspectPool:
-    """``groups`` filters of ``n`` particles for frames of ``shape``, templates (K, h, w) and G, on ``engine``."""
+    """``groups`` filters of ``n`` particles for frames of ``shape``, templates of ``template_shape`` (K, h, w) and
+    G, on ``engine``; :meth:`set_templates` before the first step."""
 
-    def __init__(self, shape, templates: np.ndarray, G: np.ndarray, groups: int, n: int, seed: int, engine: str,
+    def __init__(self, shape, template_shape, G: np.ndarray, groups: int, n: int, seed: int, engine: str,
                  arch: str | None = None):
         module = kernel_module(engine, "multiaspect", arch)
-        dims = (int(groups), int(n), tuple(int(v) for v in shape), tuple(templates.shape))
+        dims = (int(groups), int(n), tuple(int(v) for v in shape), tuple(int(v) for v in template_shape))
         # Taichi compiles a data-oriented object's kernels once per object: reuse a finished pool's of these sizes
         self.k = module.MultiaspectKernels(*dims) if engine == "numpy" else \
             backend.reusable(self, ("multiaspect",) + dims, lambda: module.MultiaspectKernels(*dims))
         self.groups, self.n, self.shape, self.seed = int(groups), int(n), tuple(shape), int(seed)
-        self.k.put("templates", templates)
-        self.k.put("energy", energy_tables(templates, shape))
         cdf = np.cumsum(G, axis=0).T.copy()  # row j: column j of G, cumulated
         cdf[:, -1] = 1.0
         self.k.put("gcdf", cdf)
+
+    def set_templates(self, templates: np.ndarray) -> None:
+        """The (K, h, w) templates a_kl(z) (Eq. 8) and their energy tables (Eq. 12; notes A6)."""
+        self.templates = np.asarray(templates, float)
+        self.energy = energy_tables(templates, self.shape)
+        self.k.put("templates", templates)
+        self.k.put("energy", self.energy)
 
     def start(self, p_absent: float, law: np.ndarray) -> None:
         """Every particle drawn from the prior (z = 0 with probability ``p_absent``; s ~ ``law``)."""
@@ -62,24 +68,36 @@ class MultiaspectPool:
         self.k.put("gpar", gmrf)
         self.k.dmap()
 
-    def step(self, kind: str, frame: int, p_a: float, motion, law, coupled: bool, moves: int = 1) -> None:
+    def set_births(self, share: float) -> None:
+        """The data-driven birth proposal of each group (:mod:`.births`) from its d and GMRF row."""
+        from .births import likelihood_map, proposal
+
+        d, gpar = self.k.get("d"), self.k.get("gpar").astype(float)
+        tables = [proposal(likelihood_map(d[g], self.templates, self.energy, *gpar[g]), share)
+                  for g in range(self.groups)]
+        self.k.put("birth_cdf", np.stack([t[0] for t in tables]))
+        self.k.put("birth_lq", np.stack([t[1] for t in tables]))
+
+    def step(self, kind: str, frame: int, p_a: float, motion, law, coupled: bool, moves: int = 1,
+             data_births: bool = False) -> None:
         """One frame of filter ``kind``: rs (§3.2: prior draw, Eq. 18's weights, multinomial resampling, ``moves``
         MH moves from the ancestor's n − 1 state, Eqs. 19–21) or apf (§3.3: a prior draw per particle, Eq. 23's
-        first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection)."""
-        k, seed, c = self.k, self.seed, int(coupled)
+        first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection).
+        ``data_births``: entering targets are drawn from :meth:`set_births`' proposal, weighted by f₀/q."""
+        k, seed, c, b = self.k, self.seed, int(coupled), int(data_births)
         motion = np.asarray(motion, np.float32)
-        k.propagate(seed, frame, 0, 0, c, p_a, motion, law)
+        k.propagate(seed, frame, 0, 0, c, b, p_a, motion, law)
         k.likelihood()
         k.weigh(0)
         k.draw(seed, frame, 0)
         k.gather()
         if kind == "rs":
             for sweep in range(moves):
-                k.propagate(seed, frame, 1 + sweep, 1, c, p_a, motion, law)
+                k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a, motion, law)
                 k.likelihood()
                 k.mh_move(seed, frame, sweep)
         else:
-            k.propagate(seed, frame, 1, 1, c, p_a, motion, law)
+            k.propagate(seed, frame, 1, 1, c, b, p_a, motion, law)
             k.likelihood()
             k.weigh(1)
             k.draw(seed, frame, 1)

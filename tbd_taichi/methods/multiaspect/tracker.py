@@ -8,7 +8,8 @@ import time
 
 import numpy as np
 
-from ...gmrf import GmrfParams, estimate_gmrf, local_mean
+from ...gmrf import GmrfParams, estimate_gmrf
+from ...multiaspect import local_plane
 from ...io import stream_frame
 from ...tables import TRACK_COLUMNS, _dtype, make_table
 from ..registry import OneSequence
@@ -38,9 +39,10 @@ class MultiaspectTracker(OneSequence):
         self.r = resolve(self.p, self.shape)
         self.filter = filter
         self.n_particles = particles(filter, self.p)
-        self.pool = MultiaspectPool(self.shape, self.r.templates, self.r.G, 1, self.n_particles, seed, engine, arch)
+        self.pool = MultiaspectPool(self.shape, self.r.templates.shape, self.r.G, 1, self.n_particles, seed, engine,
+                                    arch)
         self.pool.start(self.r.p_absent, self.r.prior_law)
-        self.peaks = self.r.templates.reshape(len(self.r.templates), -1).max(axis=1)
+        self.peaks = np.zeros(len(self.r.templates))
         self.gmrf: GmrfParams | None = None
         self.gmrf_history: list[GmrfParams] = []
         self.p_absent: list[float] = []
@@ -66,18 +68,29 @@ class MultiaspectTracker(OneSequence):
         self.gmrf_history.append(self.gmrf)
         return np.array([self.gmrf.beta_h, self.gmrf.beta_v, self.gmrf.sigma_c2], np.float32)
 
+    def set_templates(self, sigma_c: float) -> None:
+        """The templates in the input's units: a file's as they are, the vehicle's with peak 10^(PTCR/20)·σ_c."""
+        t = self.r.templates * (10.0 ** (self.p.ptcr / 20.0) * sigma_c if self.r.relative else 1.0)
+        self.templates = t
+        self.pool.set_templates(t)
+        self.peaks = t.reshape(len(t), -1).max(axis=1)
+
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; the rows declared for it (0 or 1)."""
         self._check_open("update")
         t0 = time.perf_counter()
         x = stream_frame(frame, self.shape, self.frame, "tracker").astype(np.float64)
-        y = (x - local_mean(x, self.r.mean_window)).astype(np.float32)
+        y = (x - local_plane(x, self.r.mean_window)).astype(np.float32)
         t1 = time.perf_counter()
         gmrf = self.clutter(y)
         t2 = time.perf_counter()
+        if self.frame == 0:
+            self.set_templates(float(np.sqrt(gmrf[2])))
         self.pool.set_frames(y[None], gmrf[None])
+        if self.r.data_births:
+            self.pool.set_births(self.p.birth_share)
         self.pool.step(self.filter, self.frame, self.p.p_a, self.r.motion, self.r.f0_law, self.p.exit == "coupled",
-                       self.p.mh_moves)
+                       self.p.mh_moves, self.r.data_births)
         est = self.pool.presence()[0]
         t3 = time.perf_counter()
         for stage, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2)):
