@@ -272,7 +272,7 @@ def _newton(shape, sums, beta: np.ndarray, approximate: bool):
             nb = beta + step * d
             if _feasible(shape, nb, approximate):
                 new = _profile(shape, sums, nb, approximate)
-                if True or step * size < _TOL:
+                if new[0] >= val + 1e-4 * step * (g @ d) or step * size < _TOL:
                     break
             step *= 0.5
             if step * size < 1e-3 * _TOL:  # pinned at the margin: no feasible ascent left

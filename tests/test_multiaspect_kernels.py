@@ -315,3 +315,61 @@ def test_multinomial_draws_follow_the_weights(rng):
     first = picks[0][:8] / picks[0][:8].sum()
     np.testing.assert_allclose(first[[0, 2, 5, 7]], np.array([1, 3, 4, 2]) / 10, atol=0.01)  # 4 sd of 16000 draws
     assert picks[0][8:].sum() == 16000 and picks[0][15] == 16000  # the second group's one live weight
+
+
+def test_likelihood_map_matches_the_kernels_likelihood(rng):
+    """Remark 3's map (host FFT correlation, births.py) equals the kernel's ℓ at every aspect and cell sampled."""
+    from tbd_taichi.methods.multiaspect.births import likelihood_map
+
+    shape = (14, 11)
+    t = random_templates(rng, k=2, h=5, w=3)
+    pools = make_pools(shape, t, groups=1, n=400)
+    k = pools[0]
+    frames = rng.normal(0, 2, (1,) + shape).astype(np.float32)
+    k.put("frame", frames)
+    k.put("gpar", np.array([[BH, BV, S2]], np.float32))
+    k.dmap()
+    lmap = likelihood_map(k.get("d")[0].astype(float), t, energy_tables(t, shape), BH, BV, S2)
+    assert lmap.shape == (2, 14 + 4, 11 + 2)
+    col, row = rng.integers(-1, 12, 400), rng.integers(-2, 16, 400)
+    z = rng.integers(1, 3, 400).astype(np.int32)
+    state = np.zeros((400, 4), np.float32)
+    state[:, 0], state[:, 2] = col + rng.uniform(-0.45, 0.45, 400), row + rng.uniform(-0.45, 0.45, 400)
+    k.put("prop", state)
+    k.put("prop_z", z)
+    k.put("blw", np.zeros(400, np.float32))
+    k.likelihood()
+    np.testing.assert_allclose(k.get("prop_ll"), lmap[z - 1, row + 2, col + 1], rtol=1e-4, atol=1e-3)
+
+
+def test_data_births_follow_the_proposal_and_carry_f0_over_q(rng):
+    from tbd_taichi.methods.multiaspect.births import proposal
+
+    shape = (10, 12)
+    t = random_templates(rng, k=2, h=3, w=5)
+    n = 60000
+    pools = make_pools(shape, t, groups=1, n=n)
+    cells = (10 + 2) * (12 + 4)
+    lmap = np.full((2, 12, 16), -50.0)
+    lmap[0, 3, 4], lmap[1, 7, 9] = 2.0, 1.0  # two hot cells
+    cdf, lq = proposal(lmap, 0.6)
+    q = np.diff(np.concatenate([[0.0], cdf]))
+    law = np.array([-2.5, 13.5, -1.5, 10.5, 0.0, 0.0, 2.0], np.float32)  # the image prior's f₀ over this grid
+    outs = []
+    for k in pools:
+        k.put("prev_z", np.zeros(n, np.int32))
+        k.put("birth_cdf", cdf[None])
+        k.put("birth_lq", lq[None].astype(np.float32))
+        k.propagate(2, 5, 0, 0, 0, 1, 1.0, MOTION, law)
+        outs.append((k.get("prop"), k.get("prop_z"), k.get("blw")))
+    (s, z, blw), (s2, z2, blw2) = outs
+    np.testing.assert_array_equal(z, z2)
+    np.testing.assert_allclose(s, s2, atol=1e-4)
+    np.testing.assert_allclose(blw, blw2, atol=1e-5)
+    assert (z > 0).all()
+    cell = (np.floor(s[:, 2] + 0.5).astype(int) + 1) * 16 + np.floor(s[:, 0] + 0.5).astype(int) + 2
+    counts = np.bincount(cell, minlength=cells)
+    hot = [3 * 16 + 4, 7 * 16 + 9]
+    np.testing.assert_allclose(counts[hot] / n, q[hot], atol=4 * np.sqrt(0.25 / n))
+    assert stats.chisquare(counts, q * n).pvalue > 1e-3
+    np.testing.assert_allclose(blw, np.log(1.0 / (cells * q[cell])), rtol=1e-5, atol=1e-5)
