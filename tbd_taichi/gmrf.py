@@ -216,11 +216,11 @@ class GmrfParams:
         return math.sqrt(self.sigma_c2)
 
 
-def _feasible(shape, beta, approximate: bool) -> bool:
-    """β inside the region the estimator searches, with the safety margin MARGIN."""
-    if approximate:
-        return 1.0 - 2.0 * (abs(beta[0]) + abs(beta[1])) >= MARGIN
-    return _lambda_min(shape, beta[0], beta[1]) >= MARGIN
+def _slack(shape, beta, approximate: bool) -> tuple[float, np.ndarray]:
+    """How far β is inside the search region, λ_min − MARGIN (approximate: 1 − 2|β_h| − 2|β_v| − MARGIN), and the
+    weights w of |β| in it (slack = 1 − MARGIN − w·|β|): the region is a convex diamond."""
+    w = np.full(2, 2.0) if approximate else 2.0 * np.cos(np.pi / (np.array(shape[::-1]) + 1.0))
+    return 1.0 - MARGIN - float(w @ np.abs(beta)), w
 
 
 def _profile(shape, sums, beta, approximate: bool):
@@ -253,7 +253,7 @@ def estimate_gmrf(v, approximate: bool = False, start: GmrfParams | None = None)
             return GmrfParams(0.0, 0.0, SIGMA2_FLOOR)
         sums = lag_sums(v / scale)
     beta = np.zeros(2) if start is None else np.array([start.beta_h, start.beta_v], dtype=np.float64)
-    if not (np.isfinite(beta).all() and _feasible(v.shape, beta, approximate)):
+    if not (np.isfinite(beta).all() and _slack(v.shape, beta, approximate)[0] >= 0):
         beta = np.zeros(2)
     beta, s2 = _newton(v.shape, sums, beta, approximate)
     return GmrfParams(float(beta[0]), float(beta[1]), max(s2 * scale * scale, SIGMA2_FLOOR))
@@ -261,16 +261,25 @@ def estimate_gmrf(v, approximate: bool = False, start: GmrfParams | None = None)
 
 def _newton(shape, sums, beta: np.ndarray, approximate: bool):
     """Damped Newton ascent of ℓ (see :func:`_profile`) from a feasible β: (β̂, σ̂_c²(β̂)). Where the Hessian H is
-    not negative definite the step uses ½∇² ln det A instead (negative definite, so still an ascent direction)."""
+    not negative definite the step uses ½∇² ln det A instead (negative definite, so still an ascent direction). A
+    step that would leave the search region stops on its edge; on the edge a step pointing out slides along it."""
     val, g, h, s2 = _profile(shape, sums, beta, approximate)
     for _ in range(_MAX_ITER):
         if not (h[0, 0] < 0 and np.linalg.det(h) > 0):
             h = 0.5 * _log_det_derivs(shape, beta[0], beta[1], approximate)[2]
         d = -np.linalg.solve(h, g)
-        size, step = float(np.abs(d).max()), 1.0
+        slack, w = _slack(shape, beta, approximate)
+        normal = w * np.where(beta != 0, np.sign(beta), np.sign(d))  # outward normal of the edge nearest β
+        out, step = float(normal @ d), 1.0  # out: the slack a full step uses up
+        if out > 0 and slack < 1e-12:  # on the edge, pointing out: Newton along the edge instead
+            p = np.array([normal[1], -normal[0]])
+            d = -(g @ p) / (p @ h @ p) * p
+        elif out > slack:  # the full step leaves the region: first try stopping on its edge
+            step = slack / out
+        size = float(np.abs(d).max())
         while True:  # Armijo backtracking toward β, inside the search region
             nb = beta + step * d
-            if _feasible(shape, nb, approximate):
+            if _slack(shape, nb, approximate)[0] >= 0:
                 new = _profile(shape, sums, nb, approximate)
                 if new[0] >= val + 1e-4 * step * (g @ d) or step * size < _TOL:
                     break

@@ -210,6 +210,33 @@ def test_estimate_matches_dense_maximum_likelihood_on_a_small_grid():
     np.testing.assert_allclose([est.beta_h, est.beta_v], ref.x, atol=1e-5)
 
 
+@pytest.mark.parametrize("approximate", [False, True])
+@pytest.mark.parametrize("name", ["sinusoid", "ramp", "checkerboard", "constant"])
+def test_estimate_handles_maximisers_at_the_edge(name, approximate):
+    """Smooth or alternating frames put the approximate ML on |β_h| + |β_v| = ½ (the integral stays finite there):
+    the estimate must slide along that edge to the constrained maximum, found here by Nelder–Mead from three starts
+    on ℓ built from the public log_det and lag_sums (−∞ outside the region the estimator searches)."""
+    r, c = np.arange(24.0)[:, None], np.arange(30.0)[None, :]
+    v = {"sinusoid": np.sin(r / 3 + c / 5), "ramp": r + c, "checkerboard": (-1.0) ** (r + c),
+         "constant": np.full((24, 30), 3.0)}[name]
+    s0, s_h, s_v = gmrf.lag_sums(v)
+
+    def neg(beta):
+        inside = (1 - 2 * abs(beta[0]) - 2 * abs(beta[1]) if approximate
+                  else gmrf._lambda_min(v.shape, *beta)) >= gmrf.MARGIN
+        if not inside:
+            return np.inf
+        ld = gmrf.log_det(v.shape, *beta, approximate=approximate)
+        return 0.5 * v.size * math.log((s0 - 2 * beta[0] * s_h - 2 * beta[1] * s_v) / v.size) - 0.5 * ld
+
+    ref = min((optimize.minimize(neg, x0, method="Nelder-Mead", options={"xatol": 1e-11, "fatol": 1e-13,
+                                                                           "maxiter": 4000})
+               for x0 in ([0, 0], [0.2, 0.2], [-0.2, -0.2])), key=lambda res: res.fun)
+    est = gmrf.estimate_gmrf(v, approximate=approximate)
+    assert neg([est.beta_h, est.beta_v]) <= ref.fun + 1e-9 * abs(ref.fun)
+    np.testing.assert_allclose([est.beta_h, est.beta_v], ref.x, atol=1e-5)
+
+
 def test_warm_start_gives_the_same_estimate():
     v = gmrf.sample_gmrf(np.random.default_rng(4), (120, 120), 0.22, 0.24, 3.0, 1)[0]
     for approximate in (False, True):

@@ -26,8 +26,9 @@ class MultiaspectParams:
     n_particles: int | None = param(None, doc="particles (auto: the paper's 8000 for ma-rs, 5000 for ma-apf)",
                                     symbol="N_p", unit="particles", source="§4", low=1, high=50_000_000,
                                     optional=True)
-    p_a: float = param(0.1, doc="probability that a target enters while none is present (not in the paper: "
-                       "re-acquisition within a few frames, no false alarm on clutter)", symbol="p_a",
+    p_a: float = param(0.05, doc="probability that a target enters while none is present (not in the paper: "
+                       "one entry in 20 frames; detection within a few frames, few false alarms on clutter)",
+                       symbol="p_a",
                        source="Eq. 2", low=0, high=1)
     q: float = param(PAPER_Q, doc="power spectral density of the white-noise acceleration", symbol="q",
                      unit="m²/s³", source="§4, Eq. 4", low=0)
@@ -57,7 +58,7 @@ class MultiaspectParams:
                         "Remark 3's single-frame likelihood map mixed with f₀, weighted by f₀/q); auto: data with the "
                         "image prior, prior with the paper's", source="not in the paper (Eq. 5, Remark 3)",
                         choices=("auto", "prior", "data"))
-    birth_share: float = param(0.5, doc="data births: the likelihood map's share of the proposal (the rest "
+    birth_share: float = param(0.9, doc="data births: the likelihood map's share of the proposal (the rest "
                                "uniform)", source="not in the paper", low=0, high=1, high_closed=False)
     mh_moves: int = param(1, doc="Metropolis–Hastings moves per frame (ma-rs)", source="§3.2, Eqs. 19–21", low=1,
                           high=100)
