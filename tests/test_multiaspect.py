@@ -141,3 +141,80 @@ def test_registry_lists_both_with_their_parameters():
         for key in ("n_particles", "p_a", "q", "T", "zeta", "G", "templates", "prior", "mh_moves", "mean_window"):
             assert f"\n{key} " in text or text.count(key) > 0
     assert vehicle_templates().shape == (4, 11, 11)
+
+
+def _bad_files(d):
+    """Template stacks and G matrices, each wrong in one way."""
+    good = vehicle_templates()
+    arrays = {
+        "flat.npy": good[0], "empty.npy": np.zeros((0, 11, 11)), "even.npy": np.ones((2, 10, 11)),
+        "huge.npy": np.ones((1, 65, 65)), "zero.npy": np.stack([good[0], np.zeros((11, 11))]),
+        "nan.npy": np.where(good > 0.9, np.nan, good), "inf.npy": np.where(good > 0.9, np.inf, good),
+        "g_shape.npy": np.full((3, 3), 1 / 3), "g_negative.npy": np.array([[1.2, 0, 0, 0], [-0.2, 1, 0, 0],
+                                                                          [0, 0, 1, 0], [0, 0, 0, 1]]),
+        # rows sum to 1, columns do not (G is column-stochastic, Eq. 1)
+        "g_rows.npy": np.array([[0.5, 0.5, 0, 0], [0.3, 0.3, 0.4, 0], [0, 0.2, 0.2, 0.6], [0, 0, 0.1, 0.9]]),
+    }
+    for name, a in arrays.items():
+        np.save(d / name, a)
+    (d / "text.npy").write_text("not an array")
+    return d
+
+
+BAD_PARAMS = [
+    ("templates-not-3d", {"templates": "{d}/flat.npy"}, "3-D"),
+    ("templates-k0", {"templates": "{d}/empty.npy"}, "K = 0"),
+    ("templates-even", {"templates": "{d}/even.npy"}, "odd"),
+    ("templates-oversized", {"templates": "{d}/huge.npy"}, "too large"),
+    ("templates-all-zero", {"templates": "{d}/zero.npy"}, "all zero"),
+    ("templates-nan", {"templates": "{d}/nan.npy"}, "NaN"),
+    ("templates-inf", {"templates": "{d}/inf.npy"}, "NaN or inf"),
+    ("templates-missing", {"templates": "{d}/none.npy"}, "no such file"),
+    ("templates-not-npy", {"templates": "{d}/text.npy"}, "not a readable"),
+    ("G-shape", {"G": "{d}/g_shape.npy"}, "4x4"),
+    ("G-negative", {"G": "{d}/g_negative.npy"}, "≥ 0"),
+    ("G-not-column-stochastic", {"G": "{d}/g_rows.npy"}, "column-stochastic"),
+    ("p_a-above-1", {"p_a": 1.5}, "p_a"),
+    ("p_a-negative", {"p_a": -0.1}, "p_a"),
+    ("np-zero", {"n_particles": 0}, "n_particles"),
+    ("gmrf-text", {"gmrf": "0.2,0.2"}, "BH,BV,SIGMA_C"),
+    ("gmrf-not-pd", {"gmrf": "0.3,0.3,1"}, "positive definite"),
+    ("gmrf-sigma-zero", {"gmrf": "0.2,0.2,0"}, "sigma_c"),
+    ("prior-unknown", {"prior": "anywhere"}, "prior"),
+    ("mean-window-even", {"mean_window": 30}, "odd"),
+]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("settings, offender", [c[1:] for c in BAD_PARAMS], ids=[c[0] for c in BAD_PARAMS])
+def test_bad_parameters_are_refused_by_name(tmp_path, method, settings, offender):
+    from tbd_taichi.errors import TBDError
+
+    d = _bad_files(tmp_path)
+    settings = {k: v.format(d=d) if isinstance(v, str) else v for k, v in settings.items()}
+    with pytest.raises(TBDError) as err:
+        tbd.make_tracker(method, (120, 120), **settings)
+    assert offender in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_cli_refuses_a_bad_param_and_small_frames(tmp_path, capsys):
+    d = _bad_files(tmp_path)
+    np.save(d / "frames.npy", np.zeros((4, 9, 9), np.float32))
+    np.save(d / "ok.npy", np.zeros((4, 32, 32), np.float32))
+    cases = [(["--param", "np=5"], "unknown"), (["--param", "p_a=x"], "p_a"),
+             (["--param", f"templates={d / 'even.npy'}"], "odd")]
+    for extra, offender in cases:
+        assert cli.main(["track", str(d / "ok.npy"), "--method", "ma-rs", "--out", str(d / "o.csv")] + extra) == 2
+        assert offender in capsys.readouterr().err
+    assert cli.main(["track", str(d / "frames.npy"), "--method", "ma-apf", "--out", str(d / "o.csv")]) == 2
+    assert "larger than the 9x9 frame" in capsys.readouterr().err
+
+
+def test_a_nan_frame_is_refused_at_update():
+    from tbd_taichi.errors import InputError
+
+    tracker = tbd.make_tracker("ma-rs", (40, 40), n_particles=100)
+    frame = np.zeros((40, 40), np.float32)
+    frame[3, 4] = np.nan
+    with pytest.raises(InputError, match="frame 0"):
+        tracker.update(frame)
