@@ -41,6 +41,7 @@ S_PRIOR = 300  # the initial draw: 300…307
 LAW = ("x0", "x1", "y0", "y1", "v_mean", "v_sd", "v_spread")  # f₀ and the prior: U[x0, x1] × U[y0, y1], velocity
 # per axis v_mean + v_sd·n + v_spread·(2u − 1)
 GPAR = ("beta_h", "beta_v", "sigma_c2")
+N_LAW, N_GPAR = len(LAW), len(GPAR)
 SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # columns of gsum; aspects from SUM_ASPECT
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
@@ -61,9 +62,13 @@ class MultiaspectKernels:
         self.pick, self.anc = ti.field(ti.i32, c), ti.field(ti.i32, c)
         self.cdf = ti.field(ti.f64, c)
         self.total = ti.field(ti.f64, g)
-        self.frame = ti.field(ti.f32, (g, h, w))
-        self.d = ti.field(ti.f32, (g, h, w))
+        hh, hw = self.halves
+        # d (Eq. 16) with a zero border of twice the half sizes: a template at any extended-grid centroid reads it
+        # without bounds checks; d[g, r + PAD_R, c + PAD_C] is pixel (r, c)
+        self.d = ti.field(ti.f32, (g, h + 4 * hh, w + 4 * hw))
         self.gpar = ti.field(ti.f32, (g, len(GPAR)))
+        self.motion = ti.field(ti.f32, 3)  # (a, b, c): one axis' Q Cholesky factor (w = (a·n₁, b·n₁ + c·n₂))
+        self.law = ti.field(ti.f32, len(LAW))  # f₀ (Eq. 5): kernels.multiaspect.LAW
         self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))
         self.templates = ti.field(ti.f32, (self.k, th, tw))
         self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
@@ -80,26 +85,36 @@ class MultiaspectKernels:
     # ------------------------------------------------------------------ Eq. 16
 
     @ti.kernel
-    def dmap(self):
-        """d[g] = A·y[g]: y − β_h·(left + right) − β_v·(up + down), y = 0 outside the image (Eq. 16)."""
+    def load(self, y: ti.types.ndarray(dtype=ti.f32, ndim=3), gpar: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """Each group's mean-removed frame y[g] (H, W) and its (β_h, β_v, σ_c²) row: d[g] = A·y[g] = y − β_h·(left
+        + right) − β_v·(up + down), y = 0 outside the image (Eq. 16), into the padded d (its border stays 0)."""
         h, w = ti.static(self.shape)
-        for g, r, c in self.frame:
-            bh, bv = self.gpar[g, 0], self.gpar[g, 1]
-            left = self.frame[g, r, c - 1] if c > 0 else 0.0
-            right = self.frame[g, r, c + 1] if c < w - 1 else 0.0
-            up = self.frame[g, r - 1, c] if r > 0 else 0.0
-            down = self.frame[g, r + 1, c] if r < h - 1 else 0.0
-            self.d[g, r, c] = self.frame[g, r, c] - bh * (left + right) - bv * (up + down)
+        hh, hw = ti.static(self.halves)
+        for g, i in ti.ndrange(self.groups, N_GPAR):
+            self.gpar[g, i] = gpar[g, i]
+        for g, r, c in ti.ndrange(self.groups, h, w):
+            bh, bv = gpar[g, 0], gpar[g, 1]
+            left = y[g, r, c - 1] if c > 0 else 0.0
+            right = y[g, r, c + 1] if c < w - 1 else 0.0
+            up = y[g, r - 1, c] if r > 0 else 0.0
+            down = y[g, r + 1, c] if r < h - 1 else 0.0
+            self.d[g, r + 2 * hh, c + 2 * hw] = y[g, r, c] - bh * (left + right) - bv * (up + down)
+
+    def d_image(self, g: int) -> np.ndarray:
+        """Group g's d (H, W), without the border."""
+        (h, w), (hh, hw) = self.shape, self.halves
+        return self.d.to_numpy()[g, 2 * hh:2 * hh + h, 2 * hw:2 * hw + w]
 
     # ------------------------------------------------------------------ Eqs. 1–6
 
     @ti.kernel
-    def init_prior(self, seed: ti.u32, p_absent: ti.f32, law: ti.types.vector(7, ti.f32)):
+    def init_prior(self, seed: ti.u32, p_absent: ti.f32, law: ti.types.ndarray(dtype=ti.f32, ndim=1)):
         """prev ← the prior: z = 0 with probability ``p_absent``, else uniform on 1..K; s ~ ``law`` (LAW)."""
         k_abs = key_prefix(seed, 0, S_PRIOR)
         k_asp = key_prefix(seed, 0, S_PRIOR + 1)
+        prior = ti.Vector([law[i] for i in ti.static(range(N_LAW))], dt=ti.f32)
         for p in range(self.capacity):
-            s = self.law_draw(seed, 0, S_PRIOR + 2, p, law)
+            s = self.law_draw(seed, 0, S_PRIOR + 2, p, prior)
             for i in ti.static(range(STATE)):
                 self.prev[p, i] = s[i]
             z = 0
@@ -121,15 +136,24 @@ class MultiaspectKernels:
                          dt=ti.f32)
 
     @ti.kernel
+    def configure(self, motion: ti.types.ndarray(dtype=ti.f32, ndim=1), law: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        """The motion noise factor (a, b, c) and f₀'s LAW vector the propagation uses."""
+        for i in range(3):
+            self.motion[i] = motion[i]
+        for i in range(N_LAW):
+            self.law[i] = law[i]
+
+    @ti.kernel
     def propagate(self, seed: ti.u32, frame: ti.i32, stage: ti.i32, from_ancestor: ti.i32, coupled: ti.i32,
-                  data_births: ti.i32, p_a: ti.f32, motion: ti.types.vector(3, ti.f32),
-                  law: ti.types.vector(7, ti.f32)):
-        """prop[p] ~ p(s, z | prev[q]) with q = anc[p] if ``from_ancestor`` else p (Eqs. 2, 4, 5).  ``motion`` =
-        (a, b, c), the Cholesky factor of one axis' Q (w = (a·n₁, b·n₁ + c·n₂)); P_in by Eq. 6 in closed form with
-        the position sd a; ``coupled``: exit iff the drawn s leaves the extended grid instead (same z law).
-        ``data_births``: an entering target's cell is drawn from the group's proposal q (birth_cdf) instead of f₀'s
-        uniform law (its velocity still from ``law``), and blw[p] = log(f₀/q) of the cell corrects its weight;
-        blw = 0 for every other particle."""
+                  data_births: ti.i32, p_a: ti.f32):
+        """prop[p] ~ p(s, z | prev[q]) with q = anc[p] if ``from_ancestor`` else p (Eqs. 2, 4, 5), by the
+        :meth:`configure`'d motion (a, b, c), the Cholesky factor of one axis' Q (w = (a·n₁, b·n₁ + c·n₂)), and f₀;
+        P_in by Eq. 6 in closed form with the position sd a; ``coupled``: exit iff the drawn s leaves the extended
+        grid instead (same z law).  ``data_births``: an entering target's cell is drawn from the group's proposal q
+        (birth_cdf) instead of f₀'s uniform law (its velocity still from f₀), and blw[p] = log(f₀/q) of the cell
+        corrects its weight; blw = 0 for every other particle."""
+        motion = ti.Vector([self.motion[i] for i in ti.static(range(3))], dt=ti.f32)
+        law = ti.Vector([self.law[i] for i in ti.static(range(N_LAW))], dt=ti.f32)
         base = STAGE_BASE + STAGE_STREAMS * stage
         k_exit, k_asp = key_prefix(seed, frame, base + S_EXIT), key_prefix(seed, frame, base + S_ASPECT)
         k_enter = key_prefix(seed, frame, base + S_ENTER)
@@ -221,8 +245,8 @@ class MultiaspectKernels:
     @ti.kernel
     def likelihood(self):
         """prop_ll[p] = (2λ − ρ)/(2σ_c²) for a present particle on the extended grid, else 0 (Eqs. 10, 12, 15),
-        plus the birth correction blw[p] (0 unless the particle entered from the data-driven proposal)."""
-        h, w = ti.static(self.shape)
+        plus the birth correction blw[p] (0 unless the particle entered from the data-driven proposal).  λ reads the
+        padded d, so the template's loops are unrolled without bounds checks (pixels off the image read 0)."""
         hh, hw = ti.static(self.halves)
         for p in range(self.capacity):
             z = self.prop_z[p]
@@ -232,9 +256,9 @@ class MultiaspectKernels:
                 c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
                 r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
                 lam = ti.f32(0.0)
-                for a in range(ti.max(0, hh - r), ti.min(2 * hh + 1, h + hh - r)):
-                    for b in range(ti.max(0, hw - c), ti.min(2 * hw + 1, w + hw - c)):
-                        lam += self.templates[z - 1, a, b] * self.d[g, r + a - hh, c + b - hw]
+                for a in ti.static(range(2 * hh + 1)):
+                    for b in ti.static(range(2 * hw + 1)):
+                        lam += self.templates[z - 1, a, b] * self.d[g, r + a + hh, c + b + hw]
                 e0 = self.energy[0, z - 1, r + hh, c + hw]
                 rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
                     - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
@@ -319,9 +343,9 @@ class MultiaspectKernels:
     # ------------------------------------------------------------------ §3.4
 
     @ti.kernel
-    def summarize(self):
-        """gsum[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per group in
-        one thread (f64, slot order)."""
+    def summarize(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
+        """gsum[g] = out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per
+        group in one thread (f64, slot order)."""
         span = ti.static(self.span)
         for it in range(self.groups * span):
             if it % span == 0:
@@ -336,6 +360,8 @@ class MultiaspectKernels:
                         for d in ti.static(range(STATE)):
                             self.gsum[g, SUM_X + d] += ti.cast(self.prev[p, d], ti.f64)
                         self.gsum[g, SUM_ASPECT + z - 1] += 1.0
+                for col in range(SUM_ASPECT + self.k):
+                    out[g, col] = self.gsum[g, col]
 
     # ------------------------------------------------------------------ host transfers
 

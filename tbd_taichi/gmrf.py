@@ -8,7 +8,9 @@ tridiagonal Toeplitz determinant (a Chebyshev U_M) in closed form, so one evalua
 from __future__ import annotations
 
 import functools
+import itertools
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +55,7 @@ def positive_definite(shape, beta_h: float, beta_v: float) -> bool:
 
 def check_gmrf(shape, beta_h: float, beta_v: float, sigma_c: float) -> None:
     """ParameterError unless β_h, β_v, σ_c are finite, σ_c > 0 (units) and A(β) is positive definite (notes A4)."""
-    if not all(math.isfinite(float(x)) for x in (beta_h, beta_v, sigma_c)):
+    if not all(isinstance(x, numbers.Real) and math.isfinite(x) for x in (beta_h, beta_v, sigma_c)):
         raise ParameterError(f"GMRF parameters must be finite, got beta_h={beta_h}, beta_v={beta_v}, "
                              f"sigma_c={sigma_c}")
     if not sigma_c > 0:
@@ -135,13 +137,11 @@ def _row_closed(a: np.ndarray, b: float, n_cols: int) -> tuple:
     n, x = n_cols + 1, a / (2.0 * b)
     d = (a - 2.0 * b) / (2.0 * b)
     real = d >= 0
-    if real.all():
-        u = _cheb_real(d, x, n)
-    elif not real.any():
-        u = _cheb_trig(d, n)
-    else:
-        u = np.empty((4, len(a)))
-        u[:, real], u[:, ~real] = _cheb_real(d[real], x[real], n), _cheb_trig(d[~real], n)
+    u = np.empty((4, len(a)))
+    if real.any():
+        u[:, real] = _cheb_real(d[real], x[real], n)
+    if not real.all():
+        u[:, ~real] = _cheb_trig(d[~real], n)
     ln_u, sh, k, dk = u
     s1 = k / sh
     s2 = dk / sh ** 2 + np.where(real, k, -k) * x / sh ** 3
@@ -270,22 +270,22 @@ def _newton(shape, sums, beta: np.ndarray, approximate: bool):
         d = -np.linalg.solve(h, g)
         slack, w = _slack(shape, beta, approximate)
         normal = w * np.where(beta != 0, np.sign(beta), np.sign(d))  # outward normal of the edge nearest β
-        out, step = float(normal @ d), 1.0  # out: the slack a full step uses up
+        out, edge = float(normal @ d), []  # out: the slack a full step uses up
         if out > 0 and slack < 1e-12:  # on the edge, pointing out: Newton along the edge instead
             p = np.array([normal[1], -normal[0]])
             d = -(g @ p) / (p @ h @ p) * p
         elif out > slack:  # the full step leaves the region: first try stopping on its edge
-            step = slack / out
+            edge = [slack / out]
         size = float(np.abs(d).max())
-        while True:  # Armijo backtracking toward β, inside the search region
+        for step in itertools.chain(edge, (0.5 ** k for k in itertools.count())):  # Armijo backtracking
+            if step * size < 1e-3 * _TOL:  # pinned at the margin: no feasible ascent left
+                return beta, s2
             nb = beta + step * d
             if _slack(shape, nb, approximate)[0] >= 0:
                 new = _profile(shape, sums, nb, approximate)
-                if new[0] >= val + 1e-4 * step * (g @ d) or step * size < _TOL:
+                rising = not edge or step != edge[0] or new[1] @ d > 0  # keep an edge stop only if ℓ still rises
+                if (new[0] >= val + 1e-4 * step * (g @ d) and rising) or step * size < _TOL:
                     break
-            step *= 0.5
-            if step * size < 1e-3 * _TOL:  # pinned at the margin: no feasible ascent left
-                return beta, s2
         beta, (val, g, h, s2) = nb, new
         if step * size < _TOL:
             break

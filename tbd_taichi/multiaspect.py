@@ -182,22 +182,33 @@ def energy_tables(templates: np.ndarray, shape) -> np.ndarray:
     return out
 
 
-def local_plane(frame: np.ndarray, window: int) -> np.ndarray:
-    """The local mean as a least-squares plane a + b·(x − x̄) + c·(y − ȳ) over the ``window``² pixels around each
-    pixel that lie in the image, evaluated at the pixel (box sums by ``scipy.ndimage.uniform_filter``).  Inside, it
-    equals the box mean (the window is centred); at the borders, where a box mean is biased by the slope of the
-    background (up to σ_c and more on smooth terrain: false "targets" along the edges), the plane follows it."""
-    f = np.asarray(frame, dtype=np.float64)
-    yy, xx = np.mgrid[0:f.shape[0], 0:f.shape[1]].astype(np.float64)
+class LocalPlane:
+    """The local mean of frames of ``shape`` as a least-squares plane a + b·(x − x̄) + c·(y − ȳ) over the
+    ``window``² pixels around each pixel that lie in the image, evaluated at the pixel (box sums by
+    ``scipy.ndimage.uniform_filter``; the window's geometry is summed once).  Inside, it equals the box mean (the
+    window is centred); at the borders, where a box mean is biased by the slope of the background (up to σ_c and
+    more on smooth terrain: false "targets" along the edges), the plane follows it."""
 
-    def mean(a: np.ndarray) -> np.ndarray:
-        return ndimage.uniform_filter(a, window, mode="constant")
+    def __init__(self, shape, window: int):
+        self.window = int(window)
+        yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+        self.one = self._box(np.ones(tuple(shape)))
+        self.mx, self.my = self._box(xx) / self.one, self._box(yy) / self.one
+        sxx = self._box(xx * xx) / self.one - self.mx ** 2
+        syy = self._box(yy * yy) / self.one - self.my ** 2
+        sxy = self._box(xx * yy) / self.one - self.mx * self.my
+        det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
+        self.sxx, self.syy, self.sxy, self.det = sxx / det, syy / det, sxy / det, det
+        self.dx, self.dy = xx - self.mx, yy - self.my
+        self.xx, self.yy = xx, yy
 
-    one = mean(np.ones_like(f))
-    mx, my, mf = mean(xx) / one, mean(yy) / one, mean(f) / one
-    sxx, syy = mean(xx * xx) / one - mx * mx, mean(yy * yy) / one - my * my
-    sxy = mean(xx * yy) / one - mx * my
-    sxf, syf = mean(xx * f) / one - mx * mf, mean(yy * f) / one - my * mf
-    det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
-    bx, by = (syy * sxf - sxy * syf) / det, (sxx * syf - sxy * sxf) / det
-    return mf + bx * (xx - mx) + by * (yy - my)
+    def _box(self, a: np.ndarray) -> np.ndarray:
+        return ndimage.uniform_filter(a, self.window, mode="constant")
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        """The plane's value at each pixel of ``frame`` (float64)."""
+        f = np.asarray(frame, dtype=np.float64)
+        mf = self._box(f) / self.one
+        sxf = self._box(self.xx * f) / self.one - self.mx * mf
+        syf = self._box(self.yy * f) / self.one - self.my * mf
+        return mf + (self.syy * sxf - self.sxy * syf) * self.dx + (self.sxx * syf - self.sxy * sxf) * self.dy

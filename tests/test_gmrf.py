@@ -249,6 +249,23 @@ def test_warm_start_gives_the_same_estimate():
             assert warm.sigma_c2 == pytest.approx(cold.sigma_c2, rel=1e-9)
 
 
+def test_estimate_needs_few_log_det_evaluations(monkeypatch):
+    """It runs every frame: one evaluation of ln det A and its derivatives costs O(L), and a 120×120 estimate needs
+    ≤ 10 of them from (0, 0) (8 today: Newton converges quadratically; a step stopped on the edge of the region where
+    ℓ falls is retried inside) and 1 from its own answer."""
+    v = gmrf.sample_gmrf(np.random.default_rng(0), (120, 120), 0.22, 0.24, 3.0, 1)[0]
+    calls = []
+    real = gmrf._log_det_derivs
+    monkeypatch.setattr(gmrf, "_log_det_derivs", lambda *a: calls.append(a) or real(*a))
+    for approximate in (False, True):
+        calls.clear()
+        cold = gmrf.estimate_gmrf(v, approximate=approximate)
+        assert len(calls) <= 10
+        calls.clear()
+        gmrf.estimate_gmrf(v, approximate=approximate, start=cold)
+        assert len(calls) <= 2
+
+
 def test_estimate_of_an_all_zero_frame_is_the_floor():
     for approximate in (False, True):
         est = gmrf.estimate_gmrf(np.zeros((8, 9)), approximate=approximate)
@@ -295,7 +312,7 @@ def test_positive_definite_boundary():
 @pytest.mark.parametrize("args, match", [
     ((float("nan"), 0.1, 1.0), "finite"), ((0.1, float("inf"), 1.0), "finite"), ((0.1, 0.1, float("nan")), "finite"),
     ((0.1, 0.1, 0.0), "sigma_c must be > 0"), ((0.1, 0.1, -2.0), "sigma_c must be > 0"),
-    ((0.3, 0.3, 1.0), "positive definite"), ((-0.6, 0.0, 1.0), "positive definite")])
+    ((0.3, 0.3, 1.0), "positive definite"), ((-0.6, 0.0, 1.0), "positive definite"), (("0.1", 0.1, 1.0), "finite")])
 def test_check_gmrf_errors(args, match):
     with pytest.raises(ParameterError, match=match):
         gmrf.check_gmrf((120, 120), *args)

@@ -52,9 +52,9 @@ def load(pools, rng, shape, frames=None, z_low=0):
     gpar = np.tile(np.array([[BH, BV, S2]], np.float32), (k0.groups, 1))
     gpar[:, 0] += 0.01 * np.arange(k0.groups)
     for k in pools:
-        for name, v in (("prev", state), ("prev_z", z), ("frame", frames), ("gpar", gpar),
-                        ("anc", rng.integers(0, c, c).astype(np.int32))):
+        for name, v in (("prev", state), ("prev_z", z), ("anc", rng.integers(0, c, c).astype(np.int32))):
             k.put(name, v)
+        k.load(frames, gpar)
     return state, z, frames, gpar
 
 
@@ -67,8 +67,7 @@ def test_dmap_matches_dense_eq14_and_scipy(rng, shape):
     pools = make_pools(shape, random_templates(rng))
     _, _, frames, gpar = load(pools, rng, shape)
     for k in pools:
-        k.dmap()
-        d = k.get("d")
+        d = [k.d_image(g) for g in range(k.groups)]
         for g in range(k.groups):
             a = dense_a(*shape, gpar[g, 0], gpar[g, 1])
             np.testing.assert_allclose(d[g].ravel(), a @ frames[g].ravel().astype(float), rtol=0, atol=2e-5)
@@ -84,9 +83,7 @@ def test_likelihood_is_the_exact_gaussian_ratio_at_interior_edge_and_corner(rng,
     pools = make_pools(shape, t, groups=1, n=8)
     k = pools[engine]
     frames = rng.normal(0, 2, (1,) + shape).astype(np.float32)
-    k.put("frame", frames)
-    k.put("gpar", np.array([[BH, BV, S2]], np.float32))
-    k.dmap()
+    k.load(frames, np.array([[BH, BV, S2]], np.float32))
     # centroids (col, row): interior, left edge, bottom edge, corner, just on the extended grid, off it
     spots = [(6, 5), (0, 4), (7, 10), (-1, 12), (15, -2), (16, 5)]
     state = np.zeros((8, 4), np.float32)
@@ -119,13 +116,12 @@ def test_every_step_agrees_with_the_twin(rng):
     shape = (15, 19)
     pools = make_pools(shape, random_templates(rng), groups=3, n=700)
     load(pools, rng, shape)
-    for k in pools:
-        k.dmap()
     for kind in ("rs", "apf"):
         outs = []
         for k in pools:
             o = {}
-            k.propagate(7, 3, 0, 0, 0, 0, 0.3, MOTION, LAW)
+            k.configure(MOTION, LAW)
+            k.propagate(7, 3, 0, 0, 0, 0, 0.3)
             o["prop"], o["prop_z"] = k.get("prop"), k.get("prop_z")
             k.likelihood()
             o["ll"] = k.get("prop_ll")
@@ -134,7 +130,8 @@ def test_every_step_agrees_with_the_twin(rng):
             k.draw(7, 3, 0)
             o["pick"] = k.get("pick")
             k.gather()
-            k.propagate(7, 3, 1, 1, 1, 0, 0.3, MOTION, LAW)
+            k.configure(MOTION, LAW)
+            k.propagate(7, 3, 1, 1, 1, 0, 0.3)
             k.likelihood()
             o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
             if kind == "rs":
@@ -144,8 +141,9 @@ def test_every_step_agrees_with_the_twin(rng):
                 k.draw(7, 3, 1)
                 k.gather()
             k.commit()
-            k.summarize()
-            o["prev"], o["prev_z"], o["gsum"] = k.get("prev"), k.get("prev_z"), k.get("gsum")
+            o["gsum"] = np.zeros((k.groups, tk.SUM_ASPECT + k.k))
+            k.summarize(o["gsum"])
+            o["prev"], o["prev_z"] = k.get("prev"), k.get("prev_z")
             outs.append(o)
         a, b = outs
         for key in a:
@@ -194,7 +192,8 @@ def test_transition_follows_eq2(rng):
     for k in pools:
         k.put("prev", state)
         k.put("prev_z", z)
-        k.propagate(3, 1, 0, 0, 0, 0, 0.2, motion, LAW)
+        k.configure(motion, LAW)
+        k.propagate(3, 1, 0, 0, 0, 0, 0.2)
     pz, ps = pools[0].get("prop_z"), pools[0].get("prop")
     np.testing.assert_array_equal(pz, pools[1].get("prop_z"))
     p_in = float(p_inside(17.45, 5.0, motion[0], shape, (2, 2)))
@@ -227,7 +226,8 @@ def test_coupled_exit_is_the_drawn_centroid_leaving(rng):
     for k in pools:
         k.put("prev", state)
         k.put("prev_z", np.ones(5000, np.int32))
-        k.propagate(3, 1, 0, 0, 1, 0, 0.0, MOTION, LAW)
+        k.configure(MOTION, LAW)
+        k.propagate(3, 1, 0, 0, 1, 0, 0.0)
         off = np.floor(k.get("prop")[:, 0] + 0.5) > 17
         np.testing.assert_array_equal(k.get("prop_z") == 0, off)
 
@@ -241,18 +241,18 @@ def test_resample_move_keeps_the_posterior_of_a_toy_model(rng, engine):
     n = 30000
     pools = make_pools(shape, t, groups=1, n=n)
     k = pools[engine]
-    k.put("frame", np.zeros((1,) + shape, np.float32))
-    k.put("gpar", np.array([[0.0, 0.0, 4.0]], np.float32))
-    k.dmap()
+    k.load(np.zeros((1,) + shape, np.float32), np.array([[0.0, 0.0, 4.0]], np.float32))
     state = np.tile(np.array([[15.0, 0.0, 15.0, 0.0]], np.float32), (n, 1))
     k.put("prev", state)
     k.put("prev_z", np.full(n, 2, np.int32))
-    k.propagate(5, 2, 0, 0, 0, 0, 0.0, MOTION, LAW)
+    k.configure(MOTION, LAW)
+    k.propagate(5, 2, 0, 0, 0, 0, 0.0)
     k.likelihood()
     k.weigh(0)
     k.draw(5, 2, 0)
     k.gather()
-    k.propagate(5, 2, 1, 1, 0, 0, 0.0, MOTION, LAW)
+    k.configure(MOTION, LAW)
+    k.propagate(5, 2, 1, 1, 0, 0, 0.0)
     k.likelihood()
     k.mh_move(5, 2, 0)
     z = k.get("cur_z")
@@ -276,8 +276,8 @@ def test_apf_stage_weights_by_hand(rng, engine):
     state = k.get("prev")
     state[:, 0], state[:, 2] = rng.uniform(0, 8, 6), rng.uniform(0, 8, 6)
     k.put("prev", state)
-    k.dmap()
-    k.propagate(1, 4, 0, 0, 0, 0, 0.0, MOTION, LAW)
+    k.configure(MOTION, LAW)
+    k.propagate(1, 4, 0, 0, 0, 0, 0.0)
     k.likelihood()
     ll_hat = k.get("prop_ll").astype(float)
     k.weigh(0)
@@ -286,14 +286,16 @@ def test_apf_stage_weights_by_hand(rng, engine):
     aux = k.get("pick")
     k.gather()
     np.testing.assert_array_equal(k.get("anc"), aux)
-    k.propagate(1, 4, 1, 1, 0, 0, 0.0, MOTION, LAW)
+    k.configure(MOTION, LAW)
+    k.propagate(1, 4, 1, 1, 0, 0, 0.0)
     k.likelihood()
     ll_new = k.get("prop_ll").astype(float)
     k.weigh(1)
     v = ll_new - ll_hat[aux]
     np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
     # the fresh draw starts from the auxiliary index's n − 1 state: with no motion noise, prop = F·prev[aux]
-    k.propagate(1, 4, 2, 1, 0, 0, 0.0, np.zeros(3, np.float32), LAW)
+    k.configure(np.zeros(3, np.float32), LAW)
+    k.propagate(1, 4, 2, 1, 0, 0, 0.0)
     prev = k.get("prev")
     np.testing.assert_allclose(k.get("prop")[:, 0], prev[aux, 0] + prev[aux, 1], atol=1e-5)
 
@@ -326,10 +328,8 @@ def test_likelihood_map_matches_the_kernels_likelihood(rng):
     pools = make_pools(shape, t, groups=1, n=400)
     k = pools[0]
     frames = rng.normal(0, 2, (1,) + shape).astype(np.float32)
-    k.put("frame", frames)
-    k.put("gpar", np.array([[BH, BV, S2]], np.float32))
-    k.dmap()
-    lmap = likelihood_map(k.get("d")[0].astype(float), t, energy_tables(t, shape), BH, BV, S2)
+    k.load(frames, np.array([[BH, BV, S2]], np.float32))
+    lmap = likelihood_map(k.d_image(0).astype(float), t, energy_tables(t, shape), BH, BV, S2)
     assert lmap.shape == (2, 14 + 4, 11 + 2)
     col, row = rng.integers(-1, 12, 400), rng.integers(-2, 16, 400)
     z = rng.integers(1, 3, 400).astype(np.int32)
@@ -360,7 +360,8 @@ def test_data_births_follow_the_proposal_and_carry_f0_over_q(rng):
         k.put("prev_z", np.zeros(n, np.int32))
         k.put("birth_cdf", cdf[None])
         k.put("birth_lq", lq[None].astype(np.float32))
-        k.propagate(2, 5, 0, 0, 0, 1, 1.0, MOTION, law)
+        k.configure(MOTION, law)
+        k.propagate(2, 5, 0, 0, 0, 1, 1.0)
         outs.append((k.get("prop"), k.get("prop_z"), k.get("blw")))
     (s, z, blw), (s2, z2, blw2) = outs
     np.testing.assert_array_equal(z, z2)

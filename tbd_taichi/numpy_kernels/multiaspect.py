@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.multiaspect import (GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
-                                   STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
+                                   LAW, STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
 from ..kernels.phd import SQRT_HALF
 from .phd import erf
 from .rng import normal, uniform, uniform_f64
@@ -27,8 +27,10 @@ class MultiaspectKernels:
         self.prop_ll, self.cur_ll = np.zeros(c, F32), np.zeros(c, F32)
         self.pick, self.anc = np.zeros(c, np.int32), np.zeros(c, np.int32)
         self.cdf, self.total = np.zeros(c), np.zeros(g)
-        self.frame, self.d = np.zeros((g, h, w), F32), np.zeros((g, h, w), F32)
+        hh, hw = self.halves
+        self.d = np.zeros((g, h + 4 * hh, w + 4 * hw), F32)  # zero border of twice the half sizes, as the kernels'
         self.gpar = np.zeros((g, len(GPAR)), F32)
+        self.motion, self.law = np.zeros(3, F32), np.zeros(len(LAW), F32)
         self.gsum = np.zeros((g, SUM_ASPECT + self.k))
         self.templates = np.zeros((self.k, th, tw), F32)
         self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)
@@ -47,11 +49,23 @@ class MultiaspectKernels:
         """A copy of array ``name``."""
         return getattr(self, name).copy()
 
-    def dmap(self) -> None:
-        """d = A·y per group (Eq. 16), y = 0 outside the image."""
+    def load(self, y: np.ndarray, gpar: np.ndarray) -> None:
+        """The frames y (G, H, W) and GMRF rows; d = A·y per group (Eq. 16), y = 0 outside the image."""
+        (h, w), (hh, hw) = self.shape, self.halves
+        self.gpar[...] = gpar
         bh, bv = self.gpar[:, 0, None, None], self.gpar[:, 1, None, None]
-        y = np.pad(self.frame, ((0, 0), (1, 1), (1, 1)))
-        self.d[...] = y[:, 1:-1, 1:-1] - bh * (y[:, 1:-1, :-2] + y[:, 1:-1, 2:]) - bv * (y[:, :-2, 1:-1] + y[:, 2:, 1:-1])
+        y = np.pad(np.asarray(y, F32), ((0, 0), (1, 1), (1, 1)))
+        self.d[:, 2 * hh:2 * hh + h, 2 * hw:2 * hw + w] = \
+            y[:, 1:-1, 1:-1] - bh * (y[:, 1:-1, :-2] + y[:, 1:-1, 2:]) - bv * (y[:, :-2, 1:-1] + y[:, 2:, 1:-1])
+
+    def d_image(self, g: int) -> np.ndarray:
+        """Group g's d (H, W), without the border."""
+        (h, w), (hh, hw) = self.shape, self.halves
+        return self.d[g, 2 * hh:2 * hh + h, 2 * hw:2 * hw + w].copy()
+
+    def configure(self, motion, law) -> None:
+        """The motion noise factor and f₀'s LAW vector."""
+        self.motion[...], self.law[...] = motion, law
 
     def _law_draw(self, seed: int, frame: int, stream: int, p: np.ndarray, law) -> np.ndarray:
         law = np.asarray(law, F32)
@@ -87,12 +101,13 @@ class MultiaspectKernels:
         return px * py
 
     def propagate(self, seed: int, frame: int, stage: int, from_ancestor: int, coupled: int, data_births: int,
-                  p_a: float, motion, law) -> None:
+                  p_a: float) -> None:
         """prop ~ Eqs. 2, 4, 5 from prev[p] or prev[anc[p]] (see the kernel)."""
         base, p = STAGE_BASE + STAGE_STREAMS * stage, self._slots
         q = self.anc if from_ancestor else p
         z, s = self.prev_z[q], self.prev[q]
-        a, b, c = (F32(v) for v in motion)
+        a, b, c = self.motion
+        law = self.law
         n = [normal(seed, frame, base + S_NOISE + i, p) for i in range(4)]
         moved = np.stack([s[:, 0] + s[:, 1] + a * n[0], s[:, 1] + b * n[0] + c * n[1],
                           s[:, 2] + s[:, 3] + a * n[2], s[:, 3] + b * n[2] + c * n[3]], axis=1).astype(F32)
@@ -140,10 +155,9 @@ class MultiaspectKernels:
             g = live // self.n
             c = np.floor(self.prop[live, 0] + F32(0.5)).astype(np.int64)
             r = np.floor(self.prop[live, 2] + F32(0.5)).astype(np.int64)
-            padded = np.pad(self.d, ((0, 0), (2 * hh, 2 * hh), (2 * hw, 2 * hw)))
-            ra = r[:, None] + np.arange(2 * hh + 1) + hh  # padded rows of the template's rows
+            ra = r[:, None] + np.arange(2 * hh + 1) + hh  # rows of the padded d under the template
             cb = c[:, None] + np.arange(2 * hw + 1) + hw
-            patch = padded[g[:, None, None], ra[:, :, None], cb[:, None, :]]
+            patch = self.d[g[:, None, None], ra[:, :, None], cb[:, None, :]]
             tz = self.templates[z[live] - 1]
             lam = (tz * patch).sum(axis=(1, 2), dtype=F32)
             e = self.energy[:, z[live] - 1, r + hh, c + hw]
@@ -187,11 +201,12 @@ class MultiaspectKernels:
         """prev ← cur."""
         self.prev[...], self.prev_z[...] = self.cur, self.cur_z
 
-    def summarize(self) -> None:
-        """Per group: absent count, present sums, aspect counts (see the kernel)."""
+    def summarize(self, out: np.ndarray) -> None:
+        """Per group: absent count, present sums, aspect counts, into gsum and ``out`` (see the kernel)."""
         z = self.prev_z.reshape(self.groups, self.n)
         s = self.prev.astype(np.float64).reshape(self.groups, self.n, STATE)
         self.gsum[:, SUM_ABSENT] = (z == 0).sum(axis=1)
         self.gsum[:, SUM_X:SUM_X + STATE] = (s * (z != 0)[:, :, None]).sum(axis=1)
         for a in range(self.k):
             self.gsum[:, SUM_ASPECT + a] = (z == a + 1).sum(axis=1)
+        out[...] = self.gsum

@@ -10,6 +10,7 @@ import numpy as np
 from ... import backend
 from ...engines import kernel_module
 from ...kernels.multiaspect import STATE, SUM_ABSENT, SUM_ASPECT, SUM_X
+from ...launch import Launcher
 from ...multiaspect import energy_tables
 
 FILTERS = ("rs", "apf")
@@ -45,8 +46,9 @@ class MultiaspectPool:
         dims = (int(groups), int(n), tuple(int(v) for v in shape), tuple(int(v) for v in template_shape))
         # Taichi compiles a data-oriented object's kernels once per object: reuse a finished pool's of these sizes
         self.k = module.MultiaspectKernels(*dims) if engine == "numpy" else \
-            backend.reusable(self, ("multiaspect",) + dims, lambda: module.MultiaspectKernels(*dims))
+            Launcher(backend.reusable(self, ("multiaspect",) + dims, lambda: module.MultiaspectKernels(*dims)))
         self.groups, self.n, self.shape, self.seed = int(groups), int(n), tuple(shape), int(seed)
+        self.sums = np.zeros((self.groups, SUM_ASPECT + int(template_shape[0])))
         cdf = np.cumsum(G, axis=0).T.copy()  # row j: column j of G, cumulated
         cdf[:, -1] = 1.0
         self.k.put("gcdf", cdf)
@@ -58,46 +60,45 @@ class MultiaspectPool:
         self.k.put("templates", templates)
         self.k.put("energy", self.energy)
 
-    def start(self, p_absent: float, law: np.ndarray) -> None:
-        """Every particle drawn from the prior (z = 0 with probability ``p_absent``; s ~ ``law``)."""
-        self.k.init_prior(self.seed, float(p_absent), law)
+    def start(self, p_absent: float, prior: np.ndarray, motion, f0: np.ndarray) -> None:
+        """Every particle drawn from the ``prior`` LAW (z = 0 with probability ``p_absent``); the motion noise
+        factor (a, b, c) and f₀'s LAW for the steps."""
+        self.k.configure(np.asarray(motion, np.float32), np.asarray(f0, np.float32))
+        self.k.init_prior(self.seed, float(p_absent), np.asarray(prior, np.float32))
 
     def set_frames(self, y: np.ndarray, gmrf: np.ndarray) -> None:
         """The mean-removed frames (G, H, W) and their (β_h, β_v, σ_c²) rows (G, 3); computes d (Eq. 16)."""
-        self.k.put("frame", y)
-        self.k.put("gpar", gmrf)
-        self.k.dmap()
+        self.k.load(np.ascontiguousarray(y, np.float32), np.ascontiguousarray(gmrf, np.float32))
 
     def set_births(self, share: float) -> None:
         """The data-driven birth proposal of each group (:mod:`.births`) from its d and GMRF row."""
         from .births import likelihood_map, proposal
 
-        d, gpar = self.k.get("d"), self.k.get("gpar").astype(float)
-        tables = [proposal(likelihood_map(d[g], self.templates, self.energy, *gpar[g]), share)
+        gpar = self.k.get("gpar").astype(float)
+        tables = [proposal(likelihood_map(self.k.d_image(g), self.templates, self.energy, *gpar[g]), share)
                   for g in range(self.groups)]
         self.k.put("birth_cdf", np.stack([t[0] for t in tables]))
         self.k.put("birth_lq", np.stack([t[1] for t in tables]))
 
-    def step(self, kind: str, frame: int, p_a: float, motion, law, coupled: bool, moves: int = 1,
+    def step(self, kind: str, frame: int, p_a: float, coupled: bool, moves: int = 1,
              data_births: bool = False) -> None:
         """One frame of filter ``kind``: rs (§3.2: prior draw, Eq. 18's weights, multinomial resampling, ``moves``
         MH moves from the ancestor's n − 1 state, Eqs. 19–21) or apf (§3.3: a prior draw per particle, Eq. 23's
         first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection).
         ``data_births``: entering targets are drawn from :meth:`set_births`' proposal, weighted by f₀/q."""
-        k, seed, c, b = self.k, self.seed, int(coupled), int(data_births)
-        motion = np.asarray(motion, np.float32)
-        k.propagate(seed, frame, 0, 0, c, b, p_a, motion, law)
+        k, seed, c, b, p_a = self.k, self.seed, int(coupled), int(data_births), float(p_a)
+        k.propagate(seed, frame, 0, 0, c, b, p_a)
         k.likelihood()
         k.weigh(0)
         k.draw(seed, frame, 0)
         k.gather()
         if kind == "rs":
             for sweep in range(moves):
-                k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a, motion, law)
+                k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a)
                 k.likelihood()
                 k.mh_move(seed, frame, sweep)
         else:
-            k.propagate(seed, frame, 1, 1, c, b, p_a, motion, law)
+            k.propagate(seed, frame, 1, 1, c, b, p_a)
             k.likelihood()
             k.weigh(1)
             k.draw(seed, frame, 1)
@@ -106,10 +107,9 @@ class MultiaspectPool:
 
     def presence(self) -> list[Presence]:
         """Each group's §3.4 output for the particles just committed."""
-        self.k.summarize()
-        sums = self.k.get("gsum")
+        self.k.summarize(self.sums)
         out = []
-        for row in sums:
+        for row in self.sums:
             present = self.n - row[SUM_ABSENT]
             mean = row[SUM_X:SUM_X + STATE] / present if present > 0 else np.full(STATE, np.nan)
             out.append(Presence(float(row[SUM_ABSENT] / self.n), mean, row[SUM_ASPECT:].copy()))

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from ...gmrf import GmrfParams, estimate_gmrf
-from ...multiaspect import local_plane
+from ...multiaspect import LocalPlane
 from ...io import stream_frame
 from ...tables import TRACK_COLUMNS, _dtype, make_table
 from ..registry import OneSequence
@@ -41,7 +41,8 @@ class MultiaspectTracker(OneSequence):
         self.n_particles = particles(filter, self.p)
         self.pool = MultiaspectPool(self.shape, self.r.templates.shape, self.r.G, 1, self.n_particles, seed, engine,
                                     arch)
-        self.pool.start(self.r.p_absent, self.r.prior_law)
+        self.pool.start(self.r.p_absent, self.r.prior_law, self.r.motion, self.r.f0_law)
+        self.local_mean = LocalPlane(self.shape, self.r.mean_window)
         self.peaks = np.zeros(len(self.r.templates))
         self.gmrf: GmrfParams | None = None
         self.gmrf_history: list[GmrfParams] = []
@@ -80,7 +81,7 @@ class MultiaspectTracker(OneSequence):
         self._check_open("update")
         t0 = time.perf_counter()
         x = stream_frame(frame, self.shape, self.frame, "tracker").astype(np.float64)
-        y = (x - local_plane(x, self.r.mean_window)).astype(np.float32)
+        y = (x - self.local_mean(x)).astype(np.float32)
         t1 = time.perf_counter()
         gmrf = self.clutter(y)
         t2 = time.perf_counter()
@@ -89,8 +90,8 @@ class MultiaspectTracker(OneSequence):
         self.pool.set_frames(y[None], gmrf[None])
         if self.r.data_births:
             self.pool.set_births(self.p.birth_share)
-        self.pool.step(self.filter, self.frame, self.p.p_a, self.r.motion, self.r.f0_law, self.p.exit == "coupled",
-                       self.p.mh_moves, self.r.data_births)
+        self.pool.step(self.filter, self.frame, self.p.p_a, self.p.exit == "coupled", self.p.mh_moves,
+                       self.r.data_births)
         est = self.pool.presence()[0]
         t3 = time.perf_counter()
         for stage, dt in zip(STAGES, (t1 - t0, t2 - t1, t3 - t2)):
