@@ -27,7 +27,7 @@ import taichi as ti
 
 from .loops import thread_span
 from .phd import SQRT_HALF, erf
-from .rng import NormalTables, key_prefix, normal_at, uniform_at, uniform_f64_at
+from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at
 
 STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
@@ -46,6 +46,19 @@ SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # colum
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
 
+def template_pixels(templates: np.ndarray, support: int) -> tuple:
+    """Each aspect's non-zero pixels, padded to ``support``: (rows, cols, values, counts), (K, support) arrays and
+    (K,); λ (Eq. 15) sums over them only (a vehicle fills about a third of its box)."""
+    k = len(templates)
+    rows, cols = np.zeros((k, support), np.int32), np.zeros((k, support), np.int32)
+    vals, counts = np.zeros((k, support), np.float32), np.zeros(k, np.int32)
+    for z, t in enumerate(np.asarray(templates)):
+        r, c = np.nonzero(t)
+        counts[z] = len(r)
+        rows[z, :len(r)], cols[z, :len(r)], vals[z, :len(r)] = r, c, t[r, c]
+    return rows, cols, vals, counts
+
+
 @ti.data_oriented
 class MultiaspectKernels:
     """Fields of ``groups`` filters of ``n`` particles for frames of ``shape`` and the (K, h, w) templates."""
@@ -53,6 +66,7 @@ class MultiaspectKernels:
     def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
         self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
         self.k, th, tw = (int(v) for v in template_shape)
+        self.support = th * tw  # the most non-zero template pixels an aspect can have
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
         c, g, (h, w) = self.groups * self.n, self.groups, self.shape
         self.capacity = c
@@ -69,8 +83,12 @@ class MultiaspectKernels:
         self.gpar = ti.field(ti.f32, (g, len(GPAR)))
         self.motion = ti.field(ti.f32, 3)  # (a, b, c): one axis' Q Cholesky factor (w = (a·n₁, b·n₁ + c·n₂))
         self.law = ti.field(ti.f32, len(LAW))  # f₀ (Eq. 5): kernels.multiaspect.LAW
-        self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))
-        self.templates = ti.field(ti.f32, (self.k, th, tw))
+        self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))  # aspect counts while summarising (kept at 0)
+        # each aspect's non-zero pixels (Eq. 8's b_kl = 1): row and column offsets from the template's corner, value;
+        # tcount[z] of them, the rest unused (set_templates)
+        self.t_row, self.t_col = ti.field(ti.i32, (self.k, self.support)), ti.field(ti.i32, (self.k, self.support))
+        self.t_val = ti.field(ti.f32, (self.k, self.support))
+        self.t_count = ti.field(ti.i32, self.k)
         self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
         self.gcdf = ti.field(ti.f32, (self.k, self.k))  # gcdf[j, i] = Σ_{i' ≤ i} G(i', j): column j's cumulative
         # data-driven births (not in the paper): per group the cumulative proposal q over the extended grid's cells
@@ -79,7 +97,7 @@ class MultiaspectKernels:
         self.birth_cdf = ti.field(ti.f64, (g, self.n_cells))
         self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
         self.blw = ti.field(ti.f32, c)
-        self.tables = NormalTables()
+        self.tables, self.exp_tables = NormalTables(), ExponentialTables()
         self.span = thread_span(serial)
 
     # ------------------------------------------------------------------ Eq. 16
@@ -151,7 +169,8 @@ class MultiaspectKernels:
         P_in by Eq. 6 in closed form with the position sd a; ``coupled``: exit iff the drawn s leaves the extended
         grid instead (same z law).  ``data_births``: an entering target's cell is drawn from the group's proposal q
         (birth_cdf) instead of f₀'s uniform law (its velocity still from f₀), and blw[p] = log(f₀/q) of the cell
-        corrects its weight; blw = 0 for every other particle."""
+        corrects its weight; blw = 0 for every other particle.  Each drawn particle's prop_ll is computed here too
+        (:meth:`log_ratio`: one pass, no second launch)."""
         motion = ti.Vector([self.motion[i] for i in ti.static(range(3))], dt=ti.f32)
         law = ti.Vector([self.law[i] for i in ti.static(range(N_LAW))], dt=ti.f32)
         base = STAGE_BASE + STAGE_STREAMS * stage
@@ -187,6 +206,7 @@ class MultiaspectKernels:
             for i in ti.static(range(STATE)):
                 self.prop[p, i] = moved[i]
             self.prop_z[p] = new_z
+            self.prop_ll[p] = self.log_ratio(p)
 
     @ti.func
     def birth_cell(self, g: ti.i32, u: ti.f64) -> ti.i32:
@@ -244,126 +264,151 @@ class MultiaspectKernels:
 
     @ti.kernel
     def likelihood(self):
-        """prop_ll[p] = (2λ − ρ)/(2σ_c²) for a present particle on the extended grid, else 0 (Eqs. 10, 12, 15),
-        plus the birth correction blw[p] (0 unless the particle entered from the data-driven proposal).  λ reads the
-        padded d, so the template's loops are unrolled without bounds checks (pixels off the image read 0)."""
-        hh, hw = ti.static(self.halves)
+        """prop_ll for every slot (:meth:`log_ratio`); :meth:`propagate` does this for the slots it draws."""
         for p in range(self.capacity):
-            z = self.prop_z[p]
-            out = ti.f32(0.0)
-            if z != 0 and self.on_grid(self.prop[p, 0], self.prop[p, 2]):
-                g = p // self.n
-                c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
-                r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
-                lam = ti.f32(0.0)
-                for a in ti.static(range(2 * hh + 1)):
-                    for b in ti.static(range(2 * hw + 1)):
-                        lam += self.templates[z - 1, a, b] * self.d[g, r + a + hh, c + b + hw]
-                e0 = self.energy[0, z - 1, r + hh, c + hw]
-                rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
-                    - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
-                out = (2.0 * lam - rho) / (2.0 * self.gpar[g, 2])
-            self.prop_ll[p] = out + self.blw[p]
+            self.prop_ll[p] = self.log_ratio(p)
+
+    @ti.func
+    def log_ratio(self, p: ti.i32) -> ti.f32:
+        """(2λ − ρ)/(2σ_c²) for a present particle prop[p] on the extended grid, else 0 (Eqs. 10, 12, 15), plus the
+        birth correction blw[p] (0 unless the particle entered from the data-driven proposal).  λ sums d under the
+        aspect's non-zero pixels, read from the padded d without bounds checks (pixels off the image read 0)."""
+        hh, hw = ti.static(self.halves)
+        z = self.prop_z[p]
+        out = ti.f32(0.0)
+        if z != 0 and self.on_grid(self.prop[p, 0], self.prop[p, 2]):
+            g = p // self.n
+            c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
+            r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
+            lam = ti.f32(0.0)
+            for i in range(self.t_count[z - 1]):
+                lam += self.t_val[z - 1, i] * self.d[g, r + self.t_row[z - 1, i] + hh, c + self.t_col[z - 1, i] + hw]
+            e0 = self.energy[0, z - 1, r + hh, c + hw]
+            rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
+                - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
+            out = (2.0 * lam - rho) / (2.0 * self.gpar[g, 2])
+        return out + self.blw[p]
 
     # ------------------------------------------------------------------ Eqs. 18, 23, 24: weights and resampling
 
     @ti.kernel
-    def weigh(self, second_stage: ti.i32):
-        """Per group, in one thread: cdf = cumulative e^(v − max v) in f64 with v = prop_ll (Eqs. 18, 23) or, for the
-        APF's second stage, prop_ll − cur_ll (Eq. 24: cur_ll holds the first stage's ℓ̂ of the particle's
-        auxiliary index); total[g] = its last value."""
+    def resample(self, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32, final: ti.i32):
+        """Multinomial resampling of each group, in one thread per group (slot order, f64):
+
+        * weights: cdf = cumulative e^(v − max v) with v = prop_ll (Eqs. 18, 23) or, for the APF's second stage,
+          prop_ll − cur_ll (Eq. 24: cur_ll holds the first stage's ℓ̂ of the particle's auxiliary index);
+          total[g] = its last value;
+        * draws: N sorted U(0, 1) as the normalised partial sums of N + 1 Exp(1) variates (the order statistics of
+          N uniforms), merged with cdf: pick[j] = the first slot whose cdf exceeds U_(j)·total (a multinomial
+          sample, in slot order);
+        * gather: cur[j] ← prop[pick[j]] with its ℓ and anc[j] ← pick[j] (the ancestor in prev); ``final`` (the
+          APF's post-sampling selection): prev[j] ← prop[pick[j]] instead."""
         span = ti.static(self.span)
         for it in range(self.groups * span):
             if it % span == 0:
-                g = it // span
-                a, b = g * self.n, (g + 1) * self.n
-                m = ti.f32(-3.0e38)
-                for p in range(a, b):
-                    m = ti.max(m, self.log_weight(p, second_stage))
-                cum = ti.f64(0.0)
-                for p in range(a, b):
-                    cum += ti.exp(ti.cast(self.log_weight(p, second_stage) - m, ti.f64))
-                    self.cdf[p] = cum
-                self.total[g] = cum
+                self.resample_group(it // span, seed, frame, number, second_stage, final)
+
+    @ti.func
+    def resample_group(self, g: ti.i32, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32,
+                       final: ti.i32):
+        """:meth:`resample` for group g, in this thread."""
+        a, b = g * self.n, (g + 1) * self.n
+        m = ti.f32(-3.0e38)
+        for p in range(a, b):
+            m = ti.max(m, self.log_weight(p, second_stage))
+        cum = ti.f64(0.0)
+        for p in range(a, b):
+            cum += ti.exp(ti.cast(self.log_weight(p, second_stage) - m, ti.f64))
+            self.cdf[p] = cum
+        self.total[g] = cum
+        key = key_prefix(seed, frame, S_DRAW + number)
+        span = ti.f64(0.0)
+        for j in range(a, b + 1):
+            span += exponential_at(self.exp_tables.w, self.exp_tables.k, self.exp_tables.f, key, j)
+        scale = cum / span
+        src, acc = a, ti.f64(0.0)
+        for j in range(a, b):
+            acc += exponential_at(self.exp_tables.w, self.exp_tables.k, self.exp_tables.f, key, j)
+            target = acc * scale
+            while src < b - 1 and self.cdf[src] <= target:
+                src += 1
+            self.pick[j] = src
+            if final != 0:
+                self.keep(j, src)
+            else:
+                for d in ti.static(range(STATE)):
+                    self.cur[j, d] = self.prop[src, d]
+                self.cur_z[j] = self.prop_z[src]
+                self.cur_ll[j] = self.prop_ll[src]
+                self.anc[j] = src
 
     @ti.func
     def log_weight(self, p: ti.i32, second_stage: ti.i32) -> ti.f32:
         return self.prop_ll[p] - self.cur_ll[p] if second_stage != 0 else self.prop_ll[p]
 
-    @ti.kernel
-    def draw(self, seed: ti.u32, frame: ti.i32, number: ti.i32):
-        """pick[j] ~ Categorical(cdf of j's group): multinomial resampling, a uniform per particle and a binary
-        search in the group's cumulative weights."""
-        key = key_prefix(seed, frame, S_DRAW + number)
-        for j in range(self.capacity):
-            g = j // self.n
-            target = uniform_f64_at(key, j) * self.total[g]
-            lo, hi = g * self.n, (g + 1) * self.n - 1
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if self.cdf[mid] > target:
-                    hi = mid
-                else:
-                    lo = mid + 1
-            self.pick[j] = lo
-
-    @ti.kernel
-    def gather(self):
-        """cur[j] ← prop[pick[j]] with its ℓ; anc[j] ← pick[j] (the particle's ancestor in prev)."""
-        for j in range(self.capacity):
-            i = self.pick[j]
-            for d in ti.static(range(STATE)):
-                self.cur[j, d] = self.prop[i, d]
-            self.cur_z[j] = self.prop_z[i]
-            self.cur_ll[j] = self.prop_ll[i]
-            self.anc[j] = i
+    @ti.func
+    def keep(self, j: ti.i32, i: ti.i32):
+        """prev[j] ← prop[i]."""
+        for d in ti.static(range(STATE)):
+            self.prev[j, d] = self.prop[i, d]
+        self.prev_z[j] = self.prop_z[i]
 
     # ------------------------------------------------------------------ Eqs. 19–21
 
     @ti.kernel
-    def mh_move(self, seed: ti.u32, frame: ti.i32, sweep: ti.i32):
+    def mh_move(self, seed: ti.u32, frame: ti.i32, sweep: ti.i32, final: ti.i32):
         """Accept prop[j] (drawn from the prior at the ancestor's n − 1 state) for cur[j] if u ≤ e^(ℓ̃ − ℓ)
-        (Eq. 19: the prior cancels in the independence sampler's ratio), else keep cur[j] (Eqs. 20–21)."""
+        (Eq. 19: the prior cancels in the independence sampler's ratio), else keep cur[j] (Eqs. 20–21); ``final``
+        (the last sweep): the outcome goes to prev, the particles at n for the next frame."""
         key = key_prefix(seed, frame, S_MOVE + sweep)
         for j in range(self.capacity):
-            if ti.log(uniform_at(key, j)) <= self.prop_ll[j] - self.cur_ll[j]:
+            accept = ti.log(uniform_at(key, j)) <= self.prop_ll[j] - self.cur_ll[j]
+            if final != 0:
+                if accept:
+                    self.keep(j, j)
+                else:
+                    for d in ti.static(range(STATE)):
+                        self.prev[j, d] = self.cur[j, d]
+                    self.prev_z[j] = self.cur_z[j]
+            elif accept:
                 for d in ti.static(range(STATE)):
                     self.cur[j, d] = self.prop[j, d]
                 self.cur_z[j] = self.prop_z[j]
                 self.cur_ll[j] = self.prop_ll[j]
 
-    @ti.kernel
-    def commit(self):
-        """prev ← cur: the particles at n become the next frame's n − 1."""
-        for j in range(self.capacity):
-            for d in ti.static(range(STATE)):
-                self.prev[j, d] = self.cur[j, d]
-            self.prev_z[j] = self.cur_z[j]
-
     # ------------------------------------------------------------------ §3.4
 
     @ti.kernel
     def summarize(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        """gsum[g] = out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per
-        group in one thread (f64, slot order)."""
+        """out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per group in one
+        thread (f64, slot order)."""
         span = ti.static(self.span)
         for it in range(self.groups * span):
             if it % span == 0:
                 g = it // span
-                for col in range(SUM_ASPECT + self.k):
-                    self.gsum[g, col] = 0.0
+                absent = ti.f64(0.0)
+                sums = ti.Vector([0.0] * STATE, dt=ti.f64)
                 for p in range(g * self.n, (g + 1) * self.n):
                     z = self.prev_z[p]
                     if z == 0:
-                        self.gsum[g, SUM_ABSENT] += 1.0
+                        absent += 1.0
                     else:
-                        for d in ti.static(range(STATE)):
-                            self.gsum[g, SUM_X + d] += ti.cast(self.prev[p, d], ti.f64)
+                        sums += ti.Vector([self.prev[p, d] for d in ti.static(range(STATE))], dt=ti.f64)
                         self.gsum[g, SUM_ASPECT + z - 1] += 1.0
-                for col in range(SUM_ASPECT + self.k):
-                    out[g, col] = self.gsum[g, col]
+                out[g, SUM_ABSENT] = absent
+                for d in ti.static(range(STATE)):
+                    out[g, SUM_X + d] = sums[d]
+                for a in range(self.k):
+                    out[g, SUM_ASPECT + a] = self.gsum[g, SUM_ASPECT + a]
+                    self.gsum[g, SUM_ASPECT + a] = 0.0
 
     # ------------------------------------------------------------------ host transfers
+
+    def set_templates(self, templates: np.ndarray, energy: np.ndarray) -> None:
+        """The (K, h, w) templates as their non-zero pixels (:func:`template_pixels`) and their energy tables."""
+        rows, cols, vals, counts = template_pixels(templates, self.support)
+        for name, v in (("t_row", rows), ("t_col", cols), ("t_val", vals), ("t_count", counts), ("energy", energy)):
+            self.put(name, v)
 
     def put(self, name: str, values) -> None:
         """Field ``name`` ← ``values`` (its whole shape)."""

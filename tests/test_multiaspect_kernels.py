@@ -26,9 +26,9 @@ def make_pools(shape, templates, groups=2, n=500, G=None):
     pools = (tk.MultiaspectKernels(groups, n, shape, templates.shape),
              nk.MultiaspectKernels(groups, n, shape, templates.shape))
     for k in pools:
-        k.put("templates", templates)
-        k.put("energy", energy_tables(templates, shape))
+        k.set_templates(templates, energy_tables(templates, shape))
         k.put("gcdf", cdf)
+        k.put("gpar", np.tile(np.array([[BH, BV, S2]], np.float32), (groups, 1)))
     return pools
 
 
@@ -125,22 +125,18 @@ def test_every_step_agrees_with_the_twin(rng):
             o["prop"], o["prop_z"] = k.get("prop"), k.get("prop_z")
             k.likelihood()
             o["ll"] = k.get("prop_ll")
-            k.weigh(0)
-            o["cdf"], o["total"] = k.get("cdf"), k.get("total")
-            k.draw(7, 3, 0)
-            o["pick"] = k.get("pick")
-            k.gather()
-            k.configure(MOTION, LAW)
-            k.propagate(7, 3, 1, 1, 1, 0, 0.3)
-            k.likelihood()
+            k.resample(7, 3, 0, 0, 0)
+            o["cdf"], o["total"], o["pick"] = k.get("cdf"), k.get("total"), k.get("pick")
+            o["cur1"], o["anc"] = k.get("cur"), k.get("anc")
+            k.propagate(7, 3, 1, 1, 1, 0, 0.3)  # computes prop_ll too
             o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
             if kind == "rs":
-                k.mh_move(7, 3, 0)
+                k.mh_move(7, 3, 0, 0)
+                o["cur"], o["cur_z"] = k.get("cur"), k.get("cur_z")
+                k.mh_move(7, 3, 0, 1)
             else:
-                k.weigh(1)
-                k.draw(7, 3, 1)
-                k.gather()
-            k.commit()
+                k.resample(7, 3, 1, 1, 1)
+                o["cdf2"], o["pick2"] = k.get("cdf"), k.get("pick")
             o["gsum"] = np.zeros((k.groups, tk.SUM_ASPECT + k.k))
             k.summarize(o["gsum"])
             o["prev"], o["prev_z"] = k.get("prev"), k.get("prev_z")
@@ -248,14 +244,10 @@ def test_resample_move_keeps_the_posterior_of_a_toy_model(rng, engine):
     k.configure(MOTION, LAW)
     k.propagate(5, 2, 0, 0, 0, 0, 0.0)
     k.likelihood()
-    k.weigh(0)
-    k.draw(5, 2, 0)
-    k.gather()
-    k.configure(MOTION, LAW)
+    k.resample(5, 2, 0, 0, 0)
     k.propagate(5, 2, 1, 1, 0, 0, 0.0)
-    k.likelihood()
-    k.mh_move(5, 2, 0)
-    z = k.get("cur_z")
+    k.mh_move(5, 2, 0, 1)
+    z = k.get("prev_z")
     ell = -(t.reshape(3, -1) ** 2).sum(axis=1) / (2 * 4.0)
     post = aspect_transition(3)[:, 1] * np.exp(ell)
     post /= post.sum()
@@ -280,24 +272,23 @@ def test_apf_stage_weights_by_hand(rng, engine):
     k.propagate(1, 4, 0, 0, 0, 0, 0.0)
     k.likelihood()
     ll_hat = k.get("prop_ll").astype(float)
-    k.weigh(0)
+    k.resample(1, 4, 0, 0, 0)
     np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(ll_hat - ll_hat.max())), rtol=1e-5)
-    k.draw(1, 4, 0)
     aux = k.get("pick")
-    k.gather()
     np.testing.assert_array_equal(k.get("anc"), aux)
-    k.configure(MOTION, LAW)
-    k.propagate(1, 4, 1, 1, 0, 0, 0.0)
-    k.likelihood()
-    ll_new = k.get("prop_ll").astype(float)
-    k.weigh(1)
-    v = ll_new - ll_hat[aux]
-    np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
+    np.testing.assert_allclose(k.get("cur_ll"), ll_hat[aux], rtol=1e-6)
     # the fresh draw starts from the auxiliary index's n − 1 state: with no motion noise, prop = F·prev[aux]
+    prev = k.get("prev")
     k.configure(np.zeros(3, np.float32), LAW)
     k.propagate(1, 4, 2, 1, 0, 0, 0.0)
-    prev = k.get("prev")
     np.testing.assert_allclose(k.get("prop")[:, 0], prev[aux, 0] + prev[aux, 1], atol=1e-5)
+    k.configure(MOTION, LAW)
+    k.propagate(1, 4, 1, 1, 0, 0, 0.0)
+    ll_new = k.get("prop_ll").astype(float)
+    k.resample(1, 4, 1, 1, 1)
+    v = ll_new - ll_hat[aux]
+    np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
+    np.testing.assert_allclose(k.get("prev"), k.get("prop")[k.get("pick")])  # the selection is the new prev
 
 
 def test_multinomial_draws_follow_the_weights(rng):
@@ -308,10 +299,11 @@ def test_multinomial_draws_follow_the_weights(rng):
     picks = []
     for k in pools:
         hist = np.zeros(16)
-        k.weigh(0)
         for f in range(2000):
-            k.draw(9, f, 0)
-            hist += np.bincount(k.get("pick"), minlength=16)
+            k.resample(9, f, 0, 0, 0)
+            pick = k.get("pick")
+            assert np.all(np.diff(pick[:8]) >= 0) and np.all(np.diff(pick[8:]) >= 0)  # merged: in slot order
+            hist += np.bincount(pick, minlength=16)
         picks.append(hist)
     np.testing.assert_array_equal(picks[0], picks[1])
     first = picks[0][:8] / picks[0][:8].sum()

@@ -6,9 +6,10 @@ import numpy as np
 
 from ..kernels.multiaspect import (GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
                                    LAW, STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
+from ..kernels.multiaspect import template_pixels
 from ..kernels.phd import SQRT_HALF
 from .phd import erf
-from .rng import normal, uniform, uniform_f64
+from .rng import exponential, normal, uniform, uniform_f64
 
 F32 = np.float32
 
@@ -32,13 +33,20 @@ class MultiaspectKernels:
         self.gpar = np.zeros((g, len(GPAR)), F32)
         self.motion, self.law = np.zeros(3, F32), np.zeros(len(LAW), F32)
         self.gsum = np.zeros((g, SUM_ASPECT + self.k))
-        self.templates = np.zeros((self.k, th, tw), F32)
+        self.support = th * tw
+        self.t_row, self.t_col = np.zeros((self.k, self.support), np.int32), np.zeros((self.k, self.support), np.int32)
+        self.t_val, self.t_count = np.zeros((self.k, self.support), F32), np.zeros(self.k, np.int32)
         self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)
         self.gcdf = np.zeros((self.k, self.k), F32)
         self.n_cells = (h + th - 1) * (w + tw - 1)
         self.birth_cdf, self.birth_lq = np.zeros((g, self.n_cells)), np.zeros((g, self.n_cells), F32)
         self.blw = np.zeros(c, F32)
         self._slots = np.arange(c)
+
+    def set_templates(self, templates: np.ndarray, energy: np.ndarray) -> None:
+        """The templates as their non-zero pixels and their energy tables (see the kernels)."""
+        self.t_row[...], self.t_col[...], self.t_val[...], self.t_count[...] = template_pixels(templates, self.support)
+        self.energy[...] = energy
 
     def put(self, name: str, values) -> None:
         """Array ``name`` ← ``values`` (its whole shape)."""
@@ -128,6 +136,7 @@ class MultiaspectKernels:
                 self._data_births(moved, enter, uniform_f64(seed, frame, base + S_BIRTH_CELL, born), law)
         self.prop[...] = moved
         self.prop_z[...] = new_z
+        self.likelihood()
 
     def _data_births(self, moved: np.ndarray, enter: np.ndarray, u: np.ndarray, law) -> None:
         """Entering particles' cells from the proposal q, their offsets from f₀'s uniforms, blw = log(f₀/q)."""
@@ -146,8 +155,8 @@ class MultiaspectKernels:
         self.blw[enter] = self.birth_lq[g, cell]
 
     def likelihood(self) -> None:
-        """prop_ll = (2λ − ρ)/(2σ_c²) (Eqs. 10, 12, 15; see the kernel)."""
-        (h, w), (hh, hw) = self.shape, self.halves
+        """prop_ll = (2λ − ρ)/(2σ_c²) + blw (Eqs. 10, 12, 15; λ over each aspect's non-zero pixels; see the kernel)."""
+        hh, hw = self.halves
         z = self.prop_z
         live = np.flatnonzero((z != 0) & self._on_grid(self.prop[:, 0], self.prop[:, 2]))
         out = np.zeros(self.capacity, F32)
@@ -155,51 +164,46 @@ class MultiaspectKernels:
             g = live // self.n
             c = np.floor(self.prop[live, 0] + F32(0.5)).astype(np.int64)
             r = np.floor(self.prop[live, 2] + F32(0.5)).astype(np.int64)
-            ra = r[:, None] + np.arange(2 * hh + 1) + hh  # rows of the padded d under the template
-            cb = c[:, None] + np.arange(2 * hw + 1) + hw
-            patch = self.d[g[:, None, None], ra[:, :, None], cb[:, None, :]]
-            tz = self.templates[z[live] - 1]
-            lam = (tz * patch).sum(axis=(1, 2), dtype=F32)
-            e = self.energy[:, z[live] - 1, r + hh, c + hw]
+            m = int(self.t_count.max())
+            a = z[live] - 1
+            rows = r[:, None] + self.t_row[a, :m] + hh  # rows of the padded d under the aspect's pixels
+            cols = c[:, None] + self.t_col[a, :m] + hw
+            lam = (self.t_val[a, :m] * self.d[g[:, None], rows, cols]).sum(axis=1, dtype=F32)
+            e = self.energy[:, a, r + hh, c + hw]
             rho = e[0] - F32(2.0) * self.gpar[g, 0] * e[1] - F32(2.0) * self.gpar[g, 1] * e[2]
             out[live] = (F32(2.0) * lam - rho) / (F32(2.0) * self.gpar[g, 2])
         self.prop_ll[...] = out + self.blw
 
-    def weigh(self, second_stage: int) -> None:
-        """Per-group cumulative e^(v − max v) in f64 (Eqs. 18, 23, 24; see the kernel)."""
+    def resample(self, seed: int, frame: int, number: int, second_stage: int, final: int) -> None:
+        """Per group: cumulative weights, N sorted uniforms from N + 1 Exp(1) partial sums merged with them, the
+        gather (see the kernel)."""
         v = (self.prop_ll - self.cur_ll if second_stage else self.prop_ll).reshape(self.groups, self.n)
-        e = np.exp((v - v.max(axis=1, keepdims=True)).astype(np.float64))
-        cdf = np.cumsum(e, axis=1)
+        cdf = np.cumsum(np.exp((v - v.max(axis=1, keepdims=True)).astype(np.float64)), axis=1)
         self.cdf[...] = cdf.ravel()
         self.total[...] = cdf[:, -1]
+        pick = np.empty(self.capacity, np.int64)
+        for g in range(self.groups):
+            e = exponential(seed, frame, S_DRAW + number, np.arange(g * self.n, (g + 1) * self.n + 1))
+            partial = np.cumsum(e)
+            target = partial[:-1] * (cdf[g, -1] / partial[-1])
+            local = np.minimum(np.searchsorted(cdf[g], target, side="right"), self.n - 1)
+            pick[g * self.n:(g + 1) * self.n] = local + g * self.n
+        self.pick[...] = pick
+        if final:
+            self.prev[...], self.prev_z[...] = self.prop[pick], self.prop_z[pick]
+            return
+        self.cur[...], self.cur_z[...], self.cur_ll[...] = self.prop[pick], self.prop_z[pick], self.prop_ll[pick]
+        self.anc[...] = pick
 
-    def draw(self, seed: int, frame: int, number: int) -> None:
-        """Multinomial resampling within each group (see the kernel)."""
-        p = self._slots
-        g = p // self.n
-        target = uniform_f64(seed, frame, S_DRAW + number, p) * self.total[g]
-        cdf = self.cdf.reshape(self.groups, self.n)
-        local = np.empty(self.capacity, np.int64)
-        for grp in range(self.groups):
-            sl = slice(grp * self.n, (grp + 1) * self.n)
-            local[sl] = np.searchsorted(cdf[grp], target[sl], side="right")
-        self.pick[...] = np.minimum(local, self.n - 1) + g * self.n
-
-    def gather(self) -> None:
-        """cur ← prop[pick] with ℓ; anc ← pick."""
-        i = self.pick
-        self.cur[...], self.cur_z[...], self.cur_ll[...] = self.prop[i], self.prop_z[i], self.prop_ll[i]
-        self.anc[...] = i
-
-    def mh_move(self, seed: int, frame: int, sweep: int) -> None:
-        """The MH acceptance of Eqs. 19–21 (see the kernel)."""
+    def mh_move(self, seed: int, frame: int, sweep: int, final: int) -> None:
+        """The MH acceptance of Eqs. 19–21 (see the kernel); ``final``: the outcome goes to prev."""
         accept = np.log(uniform(seed, frame, S_MOVE + sweep, self._slots)) <= self.prop_ll - self.cur_ll
+        if final:
+            self.prev[...] = np.where(accept[:, None], self.prop, self.cur)
+            self.prev_z[...] = np.where(accept, self.prop_z, self.cur_z)
+            return
         self.cur[accept], self.cur_z[accept], self.cur_ll[accept] = (self.prop[accept], self.prop_z[accept],
                                                                      self.prop_ll[accept])
-
-    def commit(self) -> None:
-        """prev ← cur."""
-        self.prev[...], self.prev_z[...] = self.cur, self.cur_z
 
     def summarize(self, out: np.ndarray) -> None:
         """Per group: absent count, present sums, aspect counts, into gsum and ``out`` (see the kernel)."""

@@ -57,8 +57,7 @@ class MultiaspectPool:
         """The (K, h, w) templates a_kl(z) (Eq. 8) and their energy tables (Eq. 12; notes A6)."""
         self.templates = np.asarray(templates, float)
         self.energy = energy_tables(templates, self.shape)
-        self.k.put("templates", templates)
-        self.k.put("energy", self.energy)
+        self.k.set_templates(self.templates, self.energy)
 
     def start(self, p_absent: float, prior: np.ndarray, motion, f0: np.ndarray) -> None:
         """Every particle drawn from the ``prior`` LAW (z = 0 with probability ``p_absent``); the motion noise
@@ -87,23 +86,15 @@ class MultiaspectPool:
         first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection).
         ``data_births``: entering targets are drawn from :meth:`set_births`' proposal, weighted by f₀/q."""
         k, seed, c, b, p_a = self.k, self.seed, int(coupled), int(data_births), float(p_a)
-        k.propagate(seed, frame, 0, 0, c, b, p_a)
-        k.likelihood()
-        k.weigh(0)
-        k.draw(seed, frame, 0)
-        k.gather()
+        k.propagate(seed, frame, 0, 0, c, b, p_a)  # with each particle's ℓ
+        k.resample(seed, frame, 0, 0, 0)
         if kind == "rs":
             for sweep in range(moves):
                 k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a)
-                k.likelihood()
-                k.mh_move(seed, frame, sweep)
+                k.mh_move(seed, frame, sweep, int(sweep == moves - 1))
         else:
             k.propagate(seed, frame, 1, 1, c, b, p_a)
-            k.likelihood()
-            k.weigh(1)
-            k.draw(seed, frame, 1)
-            k.gather()
-        k.commit()
+            k.resample(seed, frame, 1, 1, 1)
 
     def presence(self) -> list[Presence]:
         """Each group's §3.4 output for the particles just committed."""
