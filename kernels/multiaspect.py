@@ -2,8 +2,9 @@
 particles each, slot p in group p // N; every step is one launch for all groups.
 
 A particle is (x, ẋ, y, ẏ) in px and px/frame (x = column) and an aspect z ∈ {0, 1..K}, 0 = absent.  Buffers:
-``prev`` (the particles at n − 1), ``prop`` (draws from the prior and their log-likelihood ratios), ``cur`` (the
-particles at n); ``pick`` holds resampled indices, ``anc`` each particle's ancestor in ``prev``.
+``prev`` (the particles at n − 1; two sides, the step reading side ``side`` writes the next frame's particles to
+the other), ``prop`` (draws from the prior and their log-likelihood ratios), ``cur`` (resampled particles); ``pick``
+holds resampled indices, ``anc`` each particle's ancestor in ``prev``.
 
 Steps (the paper's equations):
 
@@ -33,11 +34,12 @@ STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
 S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
 S_BIRTH_CELL = 13  # a data-driven birth's cell
+ERF_ONE = 4.0  # erf(x) = 1 in f32 for x ≥ this (1 − erf(4) = 1.5·10⁻⁸ < half an f32 ulp of 1)
 STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
 STAGE_BASE = 1000
 S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
-S_MOVE = 200  # the MH acceptance uniforms: S_MOVE + the sweep (< 100)
-S_PRIOR = 300  # the initial draw: 300…307
+S_MOVE = 200  # the MH acceptance uniforms: S_MOVE + the propagation stage (≤ 100)
+S_PRIOR = 400  # the initial draw: 400…407
 LAW = ("x0", "x1", "y0", "y1", "v_mean", "v_sd", "v_spread")  # f₀ and the prior: U[x0, x1] × U[y0, y1], velocity
 # per axis v_mean + v_sd·n + v_spread·(2u − 1)
 GPAR = ("beta_h", "beta_v", "sigma_c2")
@@ -70,8 +72,10 @@ class MultiaspectKernels:
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
         c, g, (h, w) = self.groups * self.n, self.groups, self.shape
         self.capacity = c
-        self.prev, self.prop, self.cur = (ti.field(ti.f32, (c, STATE)) for _ in range(3))
-        self.prev_z, self.prop_z, self.cur_z = (ti.field(ti.i32, c) for _ in range(3))
+        self.prev = ti.field(ti.f32, (2 * c, STATE))  # side s: slots [s·C, (s + 1)·C)
+        self.prev_z = ti.field(ti.i32, 2 * c)
+        self.prop, self.cur = ti.field(ti.f32, (c, STATE)), ti.field(ti.f32, (c, STATE))
+        self.prop_z, self.cur_z = ti.field(ti.i32, c), ti.field(ti.i32, c)
         self.prop_ll, self.cur_ll = ti.field(ti.f32, c), ti.field(ti.f32, c)
         self.pick, self.anc = ti.field(ti.i32, c), ti.field(ti.i32, c)
         self.cdf = ti.field(ti.f64, c)
@@ -127,7 +131,7 @@ class MultiaspectKernels:
 
     @ti.kernel
     def init_prior(self, seed: ti.u32, p_absent: ti.f32, law: ti.types.ndarray(dtype=ti.f32, ndim=1)):
-        """prev ← the prior: z = 0 with probability ``p_absent``, else uniform on 1..K; s ~ ``law`` (LAW)."""
+        """prev (side 0) ← the prior: z = 0 with probability ``p_absent``, else uniform on 1..K; s ~ ``law`` (LAW)."""
         k_abs = key_prefix(seed, 0, S_PRIOR)
         k_asp = key_prefix(seed, 0, S_PRIOR + 1)
         prior = ti.Vector([law[i] for i in ti.static(range(N_LAW))], dt=ti.f32)
@@ -163,22 +167,26 @@ class MultiaspectKernels:
 
     @ti.kernel
     def propagate(self, seed: ti.u32, frame: ti.i32, stage: ti.i32, from_ancestor: ti.i32, coupled: ti.i32,
-                  data_births: ti.i32, p_a: ti.f32):
+                  data_births: ti.i32, p_a: ti.f32, side: ti.i32, move: ti.i32):
         """prop[p] ~ p(s, z | prev[q]) with q = anc[p] if ``from_ancestor`` else p (Eqs. 2, 4, 5), by the
         :meth:`configure`'d motion (a, b, c), the Cholesky factor of one axis' Q (w = (a·n₁, b·n₁ + c·n₂)), and f₀;
         P_in by Eq. 6 in closed form with the position sd a; ``coupled``: exit iff the drawn s leaves the extended
         grid instead (same z law).  ``data_births``: an entering target's cell is drawn from the group's proposal q
         (birth_cdf) instead of f₀'s uniform law (its velocity still from f₀), and blw[p] = log(f₀/q) of the cell
         corrects its weight; blw = 0 for every other particle.  Each drawn particle's prop_ll is computed here too
-        (:meth:`log_ratio`: one pass, no second launch)."""
+        (:meth:`log_ratio`: one pass, no second launch).  prev is read on side ``side``.  ``move`` (the resample-move
+        step, Eqs. 19–21, on the particle's own proposal): 1, accept prop[p] for cur[p] if u ≤ e^(ℓ̃ − ℓ) (the
+        prior cancels in the independence sampler's ratio); 2, the same with the outcome written to prev's other
+        side, the particles at n for the next frame (the last sweep)."""
         motion = ti.Vector([self.motion[i] for i in ti.static(range(3))], dt=ti.f32)
         law = ti.Vector([self.law[i] for i in ti.static(range(N_LAW))], dt=ti.f32)
         base = STAGE_BASE + STAGE_STREAMS * stage
         k_exit, k_asp = key_prefix(seed, frame, base + S_EXIT), key_prefix(seed, frame, base + S_ASPECT)
         k_enter = key_prefix(seed, frame, base + S_ENTER)
         kn = [key_prefix(seed, frame, base + S_NOISE + i) for i in ti.static(range(4))]
+        k_move = key_prefix(seed, frame, S_MOVE + stage)
         for p in range(self.capacity):
-            q = self.anc[p] if from_ancestor != 0 else p
+            q = (self.anc[p] if from_ancestor != 0 else p) + side * self.capacity
             z = self.prev_z[q]
             x, vx, y, vy = self.prev[q, 0], self.prev[q, 1], self.prev[q, 2], self.prev[q, 3]
             n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, kn[i], p)
@@ -207,6 +215,8 @@ class MultiaspectKernels:
                 self.prop[p, i] = moved[i]
             self.prop_z[p] = new_z
             self.prop_ll[p] = self.log_ratio(p)
+            if move != 0:
+                self.metropolis_hastings(p, uniform_at(k_move, p), move == 2, 1 - side)
 
     @ti.func
     def birth_cell(self, g: ti.i32, u: ti.f64) -> ti.i32:
@@ -252,13 +262,18 @@ class MultiaspectKernels:
 
     @ti.func
     def p_inside(self, mx: ti.f32, my: ti.f32, sd: ti.f32) -> ti.f32:
-        """P_in of Eq. 6 (notes A1): Φ-differences of the extended grid's edges around the predicted (mx, my)."""
+        """P_in of Eq. 6 (notes A1): Φ-differences of the extended grid's edges around the predicted (mx, my);
+        exactly 1 in f32 when every edge is ≥ ERF_ONE/s away (erf is then 1 to f32 precision), so erf is skipped."""
         h, w = ti.static(self.shape)
         hh, hw = ti.static(self.halves)
         s = ti.f32(SQRT_HALF) / ti.max(sd, 1e-12)
-        px = 0.5 * (erf((w - 0.5 + hw - mx) * s) - erf((-hw - 0.5 - mx) * s))
-        py = 0.5 * (erf((h - 0.5 + hh - my) * s) - erf((-hh - 0.5 - my) * s))
-        return px * py
+        near = ti.min(ti.min(w - 0.5 + hw - mx, mx + hw + 0.5), ti.min(h - 0.5 + hh - my, my + hh + 0.5)) * s
+        out = ti.f32(1.0)
+        if near < ERF_ONE:
+            px = 0.5 * (erf((w - 0.5 + hw - mx) * s) - erf((-hw - 0.5 - mx) * s))
+            py = 0.5 * (erf((h - 0.5 + hh - my) * s) - erf((-hh - 0.5 - my) * s))
+            out = px * py
+        return out
 
     # ------------------------------------------------------------------ Eqs. 10–15
 
@@ -292,7 +307,8 @@ class MultiaspectKernels:
     # ------------------------------------------------------------------ Eqs. 18, 23, 24: weights and resampling
 
     @ti.kernel
-    def resample(self, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32, final: ti.i32):
+    def resample(self, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32, final: ti.i32,
+                 side: ti.i32):
         """Multinomial resampling of each group, in one thread per group (slot order, f64):
 
         * weights: cdf = cumulative e^(v − max v) with v = prop_ll (Eqs. 18, 23) or, for the APF's second stage,
@@ -302,15 +318,15 @@ class MultiaspectKernels:
           N uniforms), merged with cdf: pick[j] = the first slot whose cdf exceeds U_(j)·total (a multinomial
           sample, in slot order);
         * gather: cur[j] ← prop[pick[j]] with its ℓ and anc[j] ← pick[j] (the ancestor in prev); ``final`` (the
-          APF's post-sampling selection): prev[j] ← prop[pick[j]] instead."""
+          APF's post-sampling selection): prev[j] on the side other than ``side`` ← prop[pick[j]] instead."""
         span = ti.static(self.span)
         for it in range(self.groups * span):
             if it % span == 0:
-                self.resample_group(it // span, seed, frame, number, second_stage, final)
+                self.resample_group(it // span, seed, frame, number, second_stage, final, 1 - side)
 
     @ti.func
     def resample_group(self, g: ti.i32, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32,
-                       final: ti.i32):
+                       final: ti.i32, out_side: ti.i32):
         """:meth:`resample` for group g, in this thread."""
         a, b = g * self.n, (g + 1) * self.n
         m = ti.f32(-3.0e38)
@@ -334,7 +350,7 @@ class MultiaspectKernels:
                 src += 1
             self.pick[j] = src
             if final != 0:
-                self.keep(j, src)
+                self.keep(j, src, out_side)
             else:
                 for d in ti.static(range(STATE)):
                     self.cur[j, d] = self.prop[src, d]
@@ -347,48 +363,47 @@ class MultiaspectKernels:
         return self.prop_ll[p] - self.cur_ll[p] if second_stage != 0 else self.prop_ll[p]
 
     @ti.func
-    def keep(self, j: ti.i32, i: ti.i32):
-        """prev[j] ← prop[i]."""
+    def keep(self, j: ti.i32, i: ti.i32, side: ti.i32):
+        """prev[j] on side ``side`` ← prop[i]."""
+        o = j + side * self.capacity
         for d in ti.static(range(STATE)):
-            self.prev[j, d] = self.prop[i, d]
-        self.prev_z[j] = self.prop_z[i]
+            self.prev[o, d] = self.prop[i, d]
+        self.prev_z[o] = self.prop_z[i]
 
     # ------------------------------------------------------------------ Eqs. 19–21
 
-    @ti.kernel
-    def mh_move(self, seed: ti.u32, frame: ti.i32, sweep: ti.i32, final: ti.i32):
-        """Accept prop[j] (drawn from the prior at the ancestor's n − 1 state) for cur[j] if u ≤ e^(ℓ̃ − ℓ)
-        (Eq. 19: the prior cancels in the independence sampler's ratio), else keep cur[j] (Eqs. 20–21); ``final``
-        (the last sweep): the outcome goes to prev, the particles at n for the next frame."""
-        key = key_prefix(seed, frame, S_MOVE + sweep)
-        for j in range(self.capacity):
-            accept = ti.log(uniform_at(key, j)) <= self.prop_ll[j] - self.cur_ll[j]
-            if final != 0:
-                if accept:
-                    self.keep(j, j)
-                else:
-                    for d in ti.static(range(STATE)):
-                        self.prev[j, d] = self.cur[j, d]
-                    self.prev_z[j] = self.cur_z[j]
-            elif accept:
+    @ti.func
+    def metropolis_hastings(self, j: ti.i32, u: ti.f32, final: ti.i32, side: ti.i32):
+        """Accept prop[j] (drawn from the prior at the ancestor's n − 1 state) for cur[j] if u ≤ e^(ℓ̃ − ℓ) (Eq. 19),
+        else keep cur[j] (Eqs. 20–21); ``final``: the outcome goes to prev[j] on side ``side`` instead."""
+        accept = ti.log(u) <= self.prop_ll[j] - self.cur_ll[j]
+        if final != 0:
+            if accept:
+                self.keep(j, j, side)
+            else:
+                o = j + side * self.capacity
                 for d in ti.static(range(STATE)):
-                    self.cur[j, d] = self.prop[j, d]
-                self.cur_z[j] = self.prop_z[j]
-                self.cur_ll[j] = self.prop_ll[j]
+                    self.prev[o, d] = self.cur[j, d]
+                self.prev_z[o] = self.cur_z[j]
+        elif accept:
+            for d in ti.static(range(STATE)):
+                self.cur[j, d] = self.prop[j, d]
+            self.cur_z[j] = self.prop_z[j]
+            self.cur_ll[j] = self.prop_ll[j]
 
     # ------------------------------------------------------------------ §3.4
 
     @ti.kernel
-    def summarize(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2)):
-        """out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect), per group in one
-        thread (f64, slot order)."""
+    def summarize(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2), side: ti.i32):
+        """out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect) of prev's side
+        ``side``, per group in one thread (f64, slot order)."""
         span = ti.static(self.span)
         for it in range(self.groups * span):
             if it % span == 0:
                 g = it // span
                 absent = ti.f64(0.0)
                 sums = ti.Vector([0.0] * STATE, dt=ti.f64)
-                for p in range(g * self.n, (g + 1) * self.n):
+                for p in range(g * self.n + side * self.capacity, (g + 1) * self.n + side * self.capacity):
                     z = self.prev_z[p]
                     if z == 0:
                         absent += 1.0
@@ -409,6 +424,19 @@ class MultiaspectKernels:
         rows, cols, vals, counts = template_pixels(templates, self.support)
         for name, v in (("t_row", rows), ("t_col", cols), ("t_val", vals), ("t_count", counts), ("energy", energy)):
             self.put(name, v)
+
+    def set_particles(self, state: np.ndarray, z: np.ndarray, side: int = 0) -> None:
+        """prev's side ``side`` ← (C, 4) states and (C,) aspects."""
+        c = self.capacity
+        full, full_z = self.prev.to_numpy(), self.prev_z.to_numpy()
+        full[side * c:(side + 1) * c], full_z[side * c:(side + 1) * c] = state, z
+        self.put("prev", full)
+        self.put("prev_z", full_z)
+
+    def particles(self, side: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """prev's side ``side``: (C, 4) states and (C,) aspects."""
+        c = self.capacity
+        return self.prev.to_numpy()[side * c:(side + 1) * c], self.prev_z.to_numpy()[side * c:(side + 1) * c]
 
     def put(self, name: str, values) -> None:
         """Field ``name`` ← ``values`` (its whole shape)."""

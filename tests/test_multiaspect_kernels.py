@@ -52,8 +52,8 @@ def load(pools, rng, shape, frames=None, z_low=0):
     gpar = np.tile(np.array([[BH, BV, S2]], np.float32), (k0.groups, 1))
     gpar[:, 0] += 0.01 * np.arange(k0.groups)
     for k in pools:
-        for name, v in (("prev", state), ("prev_z", z), ("anc", rng.integers(0, c, c).astype(np.int32))):
-            k.put(name, v)
+        k.set_particles(state, z)
+        k.put("anc", rng.integers(0, c, c).astype(np.int32))
         k.load(frames, gpar)
     return state, z, frames, gpar
 
@@ -121,25 +121,25 @@ def test_every_step_agrees_with_the_twin(rng):
         for k in pools:
             o = {}
             k.configure(MOTION, LAW)
-            k.propagate(7, 3, 0, 0, 0, 0, 0.3)
+            k.propagate(7, 3, 0, 0, 0, 0, 0.3, 0, 0)
             o["prop"], o["prop_z"] = k.get("prop"), k.get("prop_z")
             k.likelihood()
             o["ll"] = k.get("prop_ll")
-            k.resample(7, 3, 0, 0, 0)
+            k.resample(7, 3, 0, 0, 0, 0)
             o["cdf"], o["total"], o["pick"] = k.get("cdf"), k.get("total"), k.get("pick")
             o["cur1"], o["anc"] = k.get("cur"), k.get("anc")
-            k.propagate(7, 3, 1, 1, 1, 0, 0.3)  # computes prop_ll too
-            o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
             if kind == "rs":
-                k.mh_move(7, 3, 0, 0)
+                k.propagate(7, 3, 1, 1, 1, 0, 0.3, 0, 1)  # computes prop_ll too, and one MH move into cur
                 o["cur"], o["cur_z"] = k.get("cur"), k.get("cur_z")
-                k.mh_move(7, 3, 0, 1)
+                k.propagate(7, 3, 2, 1, 1, 0, 0.3, 0, 2)  # the last sweep: into prev's side 1
             else:
-                k.resample(7, 3, 1, 1, 1)
+                k.propagate(7, 3, 1, 1, 1, 0, 0.3, 0, 0)
+                k.resample(7, 3, 1, 1, 1, 0)
                 o["cdf2"], o["pick2"] = k.get("cdf"), k.get("pick")
             o["gsum"] = np.zeros((k.groups, tk.SUM_ASPECT + k.k))
-            k.summarize(o["gsum"])
-            o["prev"], o["prev_z"] = k.get("prev"), k.get("prev_z")
+            o["prop2"], o["z2"], o["ll2"] = k.get("prop"), k.get("prop_z"), k.get("prop_ll")
+            k.summarize(o["gsum"], 1)
+            o["prev"], o["prev_z"] = k.particles(1)
             outs.append(o)
         a, b = outs
         for key in a:
@@ -158,9 +158,9 @@ def test_prior_draw_agrees_and_follows_its_law(rng):
     law = np.array([2, 12, 5, 9, 2.0, 0.1, 0.0], np.float32)
     for k in pools:
         k.init_prior(11, 0.25, law)
-    s0, z0 = pools[0].get("prev"), pools[0].get("prev_z")
-    np.testing.assert_allclose(s0, pools[1].get("prev"), atol=1e-5)
-    np.testing.assert_array_equal(z0, pools[1].get("prev_z"))
+    s0, z0 = pools[0].particles(0)
+    np.testing.assert_allclose(s0, pools[1].particles(0)[0], atol=1e-5)
+    np.testing.assert_array_equal(z0, pools[1].particles(0)[1])
     n = len(z0)
     # P(z = 0) = 0.25 within 4 binomial sd; aspects uniform on 1..K (chi-square at the 0.1% level)
     assert abs((z0 == 0).mean() - 0.25) < 4 * np.sqrt(0.25 * 0.75 / n)
@@ -186,10 +186,9 @@ def test_transition_follows_eq2(rng):
     motion = np.asarray(noise_factor(motion_noise(6.0, 0.04, 0.2)), np.float32)
     G = aspect_transition(4)
     for k in pools:
-        k.put("prev", state)
-        k.put("prev_z", z)
+        k.set_particles(state, z)
         k.configure(motion, LAW)
-        k.propagate(3, 1, 0, 0, 0, 0, 0.2)
+        k.propagate(3, 1, 0, 0, 0, 0, 0.2, 0, 0)
     pz, ps = pools[0].get("prop_z"), pools[0].get("prop")
     np.testing.assert_array_equal(pz, pools[1].get("prop_z"))
     p_in = float(p_inside(17.45, 5.0, motion[0], shape, (2, 2)))
@@ -220,10 +219,9 @@ def test_coupled_exit_is_the_drawn_centroid_leaving(rng):
     state = np.zeros((5000, 4), np.float32)
     state[:, 0], state[:, 2] = 17.45, 5.0
     for k in pools:
-        k.put("prev", state)
-        k.put("prev_z", np.ones(5000, np.int32))
+        k.set_particles(state, np.ones(5000, np.int32))
         k.configure(MOTION, LAW)
-        k.propagate(3, 1, 0, 0, 1, 0, 0.0)
+        k.propagate(3, 1, 0, 0, 1, 0, 0.0, 0, 0)
         off = np.floor(k.get("prop")[:, 0] + 0.5) > 17
         np.testing.assert_array_equal(k.get("prop_z") == 0, off)
 
@@ -239,15 +237,13 @@ def test_resample_move_keeps_the_posterior_of_a_toy_model(rng, engine):
     k = pools[engine]
     k.load(np.zeros((1,) + shape, np.float32), np.array([[0.0, 0.0, 4.0]], np.float32))
     state = np.tile(np.array([[15.0, 0.0, 15.0, 0.0]], np.float32), (n, 1))
-    k.put("prev", state)
-    k.put("prev_z", np.full(n, 2, np.int32))
+    k.set_particles(state, np.full(n, 2, np.int32))
     k.configure(MOTION, LAW)
-    k.propagate(5, 2, 0, 0, 0, 0, 0.0)
+    k.propagate(5, 2, 0, 0, 0, 0, 0.0, 0, 0)
     k.likelihood()
-    k.resample(5, 2, 0, 0, 0)
-    k.propagate(5, 2, 1, 1, 0, 0, 0.0)
-    k.mh_move(5, 2, 0, 1)
-    z = k.get("prev_z")
+    k.resample(5, 2, 0, 0, 0, 0)
+    k.propagate(5, 2, 1, 1, 0, 0, 0.0, 0, 2)  # the MH move, into prev's side 1
+    z = k.particles(1)[1]
     ell = -(t.reshape(3, -1) ** 2).sum(axis=1) / (2 * 4.0)
     post = aspect_transition(3)[:, 1] * np.exp(ell)
     post /= post.sum()
@@ -265,30 +261,30 @@ def test_apf_stage_weights_by_hand(rng, engine):
     t = random_templates(rng, k=2, h=3, w=3)
     k = make_pools(shape, t, groups=1, n=6)[engine]
     load((k,), rng, shape, z_low=1)
-    state = k.get("prev")
+    state, z = k.particles(0)
     state[:, 0], state[:, 2] = rng.uniform(0, 8, 6), rng.uniform(0, 8, 6)
-    k.put("prev", state)
+    k.set_particles(state, z)
     k.configure(MOTION, LAW)
-    k.propagate(1, 4, 0, 0, 0, 0, 0.0)
+    k.propagate(1, 4, 0, 0, 0, 0, 0.0, 0, 0)
     k.likelihood()
     ll_hat = k.get("prop_ll").astype(float)
-    k.resample(1, 4, 0, 0, 0)
+    k.resample(1, 4, 0, 0, 0, 0)
     np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(ll_hat - ll_hat.max())), rtol=1e-5)
     aux = k.get("pick")
     np.testing.assert_array_equal(k.get("anc"), aux)
     np.testing.assert_allclose(k.get("cur_ll"), ll_hat[aux], rtol=1e-6)
     # the fresh draw starts from the auxiliary index's n − 1 state: with no motion noise, prop = F·prev[aux]
-    prev = k.get("prev")
+    prev = k.particles(0)[0]
     k.configure(np.zeros(3, np.float32), LAW)
-    k.propagate(1, 4, 2, 1, 0, 0, 0.0)
+    k.propagate(1, 4, 2, 1, 0, 0, 0.0, 0, 0)
     np.testing.assert_allclose(k.get("prop")[:, 0], prev[aux, 0] + prev[aux, 1], atol=1e-5)
     k.configure(MOTION, LAW)
-    k.propagate(1, 4, 1, 1, 0, 0, 0.0)
+    k.propagate(1, 4, 1, 1, 0, 0, 0.0, 0, 0)
     ll_new = k.get("prop_ll").astype(float)
-    k.resample(1, 4, 1, 1, 1)
+    k.resample(1, 4, 1, 1, 1, 0)
     v = ll_new - ll_hat[aux]
     np.testing.assert_allclose(k.get("cdf"), np.cumsum(np.exp(v - v.max())), rtol=1e-4)
-    np.testing.assert_allclose(k.get("prev"), k.get("prop")[k.get("pick")])  # the selection is the new prev
+    np.testing.assert_allclose(k.particles(1)[0], k.get("prop")[k.get("pick")])  # the selection: the other side
 
 
 def test_multinomial_draws_follow_the_weights(rng):
@@ -300,7 +296,7 @@ def test_multinomial_draws_follow_the_weights(rng):
     for k in pools:
         hist = np.zeros(16)
         for f in range(2000):
-            k.resample(9, f, 0, 0, 0)
+            k.resample(9, f, 0, 0, 0, 0)
             pick = k.get("pick")
             assert np.all(np.diff(pick[:8]) >= 0) and np.all(np.diff(pick[8:]) >= 0)  # merged: in slot order
             hist += np.bincount(pick, minlength=16)
@@ -349,11 +345,11 @@ def test_data_births_follow_the_proposal_and_carry_f0_over_q(rng):
     law = np.array([-2.5, 13.5, -1.5, 10.5, 0.0, 0.0, 2.0], np.float32)  # the image prior's f₀ over this grid
     outs = []
     for k in pools:
-        k.put("prev_z", np.zeros(n, np.int32))
+        k.set_particles(np.zeros((n, 4), np.float32), np.zeros(n, np.int32))
         k.put("birth_cdf", cdf[None])
         k.put("birth_lq", lq[None].astype(np.float32))
         k.configure(MOTION, law)
-        k.propagate(2, 5, 0, 0, 0, 1, 1.0)
+        k.propagate(2, 5, 0, 0, 0, 1, 1.0, 0, 0)
         outs.append((k.get("prop"), k.get("prop_z"), k.get("blw")))
     (s, z, blw), (s2, z2, blw2) = outs
     np.testing.assert_array_equal(z, z2)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.multiaspect import (GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
+from ..kernels.multiaspect import (ERF_ONE, GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
                                    LAW, STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
 from ..kernels.multiaspect import template_pixels
 from ..kernels.phd import SQRT_HALF
@@ -23,8 +23,9 @@ class MultiaspectKernels:
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
         c, g, (h, w) = self.groups * self.n, self.groups, self.shape
         self.capacity = c
-        self.prev, self.prop, self.cur = (np.zeros((c, STATE), F32) for _ in range(3))
-        self.prev_z, self.prop_z, self.cur_z = (np.zeros(c, np.int32) for _ in range(3))
+        self.prev, self.prev_z = np.zeros((2 * c, STATE), F32), np.zeros(2 * c, np.int32)  # two sides
+        self.prop, self.cur = np.zeros((c, STATE), F32), np.zeros((c, STATE), F32)
+        self.prop_z, self.cur_z = np.zeros(c, np.int32), np.zeros(c, np.int32)
         self.prop_ll, self.cur_ll = np.zeros(c, F32), np.zeros(c, F32)
         self.pick, self.anc = np.zeros(c, np.int32), np.zeros(c, np.int32)
         self.cdf, self.total = np.zeros(c), np.zeros(g)
@@ -32,7 +33,6 @@ class MultiaspectKernels:
         self.d = np.zeros((g, h + 4 * hh, w + 4 * hw), F32)  # zero border of twice the half sizes, as the kernels'
         self.gpar = np.zeros((g, len(GPAR)), F32)
         self.motion, self.law = np.zeros(3, F32), np.zeros(len(LAW), F32)
-        self.gsum = np.zeros((g, SUM_ASPECT + self.k))
         self.support = th * tw
         self.t_row, self.t_col = np.zeros((self.k, self.support), np.int32), np.zeros((self.k, self.support), np.int32)
         self.t_val, self.t_count = np.zeros((self.k, self.support), F32), np.zeros(self.k, np.int32)
@@ -47,6 +47,16 @@ class MultiaspectKernels:
         """The templates as their non-zero pixels and their energy tables (see the kernels)."""
         self.t_row[...], self.t_col[...], self.t_val[...], self.t_count[...] = template_pixels(templates, self.support)
         self.energy[...] = energy
+
+    def set_particles(self, state: np.ndarray, z: np.ndarray, side: int = 0) -> None:
+        """prev's side ``side`` ← (C, 4) states and (C,) aspects."""
+        sl = slice(side * self.capacity, (side + 1) * self.capacity)
+        self.prev[sl], self.prev_z[sl] = state, z
+
+    def particles(self, side: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """prev's side ``side``: (C, 4) states and (C,) aspects."""
+        sl = slice(side * self.capacity, (side + 1) * self.capacity)
+        return self.prev[sl].copy(), self.prev_z[sl].copy()
 
     def put(self, name: str, values) -> None:
         """Array ``name`` ← ``values`` (its whole shape)."""
@@ -90,10 +100,10 @@ class MultiaspectKernels:
 
     def init_prior(self, seed: int, p_absent: float, law) -> None:
         """prev ← the prior (see the kernel)."""
-        p = self._slots
-        self.prev[...] = self._law_draw(seed, 0, S_PRIOR + 2, p, law)
+        p, c = self._slots, self.capacity
+        self.prev[:c] = self._law_draw(seed, 0, S_PRIOR + 2, p, law)
         absent = uniform(seed, 0, S_PRIOR, p) < F32(p_absent)
-        self.prev_z[...] = np.where(absent, 0, self._uniform_aspect(uniform(seed, 0, S_PRIOR + 1, p)))
+        self.prev_z[:c] = np.where(absent, 0, self._uniform_aspect(uniform(seed, 0, S_PRIOR + 1, p)))
 
     def _on_grid(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         (h, w), (hh, hw) = self.shape, self.halves
@@ -101,18 +111,25 @@ class MultiaspectKernels:
         return (c >= -hw) & (c < w + hw) & (r >= -hh) & (r < h + hh)
 
     def _p_inside(self, mx: np.ndarray, my: np.ndarray, sd: float) -> np.ndarray:
+        """P_in of Eq. 6; 1 where every edge is ≥ ERF_ONE/s away (see the kernel)."""
         (h, w), (hh, hw) = self.shape, self.halves
         s = F32(SQRT_HALF) / F32(max(sd, 1e-12))
         half = F32(0.5)
-        px = half * (erf((F32(w - 0.5 + hw) - mx) * s) - erf((F32(-hw - 0.5) - mx) * s))
-        py = half * (erf((F32(h - 0.5 + hh) - my) * s) - erf((F32(-hh - 0.5) - my) * s))
-        return px * py
+        near = np.minimum(np.minimum(F32(w - 0.5 + hw) - mx, mx + F32(hw + 0.5)),
+                          np.minimum(F32(h - 0.5 + hh) - my, my + F32(hh + 0.5))) * s < F32(ERF_ONE)
+        out = np.ones(len(mx), F32)
+        x, y = mx[near], my[near]
+        px = half * (erf((F32(w - 0.5 + hw) - x) * s) - erf((F32(-hw - 0.5) - x) * s))
+        py = half * (erf((F32(h - 0.5 + hh) - y) * s) - erf((F32(-hh - 0.5) - y) * s))
+        out[near] = px * py
+        return out
 
     def propagate(self, seed: int, frame: int, stage: int, from_ancestor: int, coupled: int, data_births: int,
-                  p_a: float) -> None:
-        """prop ~ Eqs. 2, 4, 5 from prev[p] or prev[anc[p]] (see the kernel)."""
+                  p_a: float, side: int, move: int) -> None:
+        """prop ~ Eqs. 2, 4, 5 from prev[p] or prev[anc[p]] on side ``side``, with ℓ; ``move``: the MH step (see
+        the kernel)."""
         base, p = STAGE_BASE + STAGE_STREAMS * stage, self._slots
-        q = self.anc if from_ancestor else p
+        q = (self.anc if from_ancestor else p) + side * self.capacity
         z, s = self.prev_z[q], self.prev[q]
         a, b, c = self.motion
         law = self.law
@@ -137,6 +154,8 @@ class MultiaspectKernels:
         self.prop[...] = moved
         self.prop_z[...] = new_z
         self.likelihood()
+        if move:
+            self._metropolis_hastings(uniform(seed, frame, S_MOVE + stage, p), move == 2, 1 - side)
 
     def _data_births(self, moved: np.ndarray, enter: np.ndarray, u: np.ndarray, law) -> None:
         """Entering particles' cells from the proposal q, their offsets from f₀'s uniforms, blw = log(f₀/q)."""
@@ -174,7 +193,7 @@ class MultiaspectKernels:
             out[live] = (F32(2.0) * lam - rho) / (F32(2.0) * self.gpar[g, 2])
         self.prop_ll[...] = out + self.blw
 
-    def resample(self, seed: int, frame: int, number: int, second_stage: int, final: int) -> None:
+    def resample(self, seed: int, frame: int, number: int, second_stage: int, final: int, side: int) -> None:
         """Per group: cumulative weights, N sorted uniforms from N + 1 Exp(1) partial sums merged with them, the
         gather (see the kernel)."""
         v = (self.prop_ll - self.cur_ll if second_stage else self.prop_ll).reshape(self.groups, self.n)
@@ -190,27 +209,29 @@ class MultiaspectKernels:
             pick[g * self.n:(g + 1) * self.n] = local + g * self.n
         self.pick[...] = pick
         if final:
-            self.prev[...], self.prev_z[...] = self.prop[pick], self.prop_z[pick]
+            out = slice((1 - side) * self.capacity, (2 - side) * self.capacity)
+            self.prev[out], self.prev_z[out] = self.prop[pick], self.prop_z[pick]
             return
         self.cur[...], self.cur_z[...], self.cur_ll[...] = self.prop[pick], self.prop_z[pick], self.prop_ll[pick]
         self.anc[...] = pick
 
-    def mh_move(self, seed: int, frame: int, sweep: int, final: int) -> None:
-        """The MH acceptance of Eqs. 19–21 (see the kernel); ``final``: the outcome goes to prev."""
-        accept = np.log(uniform(seed, frame, S_MOVE + sweep, self._slots)) <= self.prop_ll - self.cur_ll
+    def _metropolis_hastings(self, u: np.ndarray, final: bool, side: int) -> None:
+        """Eqs. 19–21 on every slot's own proposal; ``final``: the outcome to prev's side ``side``."""
+        accept = np.log(u) <= self.prop_ll - self.cur_ll
         if final:
-            self.prev[...] = np.where(accept[:, None], self.prop, self.cur)
-            self.prev_z[...] = np.where(accept, self.prop_z, self.cur_z)
+            out = slice(side * self.capacity, (side + 1) * self.capacity)
+            self.prev[out] = np.where(accept[:, None], self.prop, self.cur)
+            self.prev_z[out] = np.where(accept, self.prop_z, self.cur_z)
             return
         self.cur[accept], self.cur_z[accept], self.cur_ll[accept] = (self.prop[accept], self.prop_z[accept],
                                                                      self.prop_ll[accept])
 
-    def summarize(self, out: np.ndarray) -> None:
-        """Per group: absent count, present sums, aspect counts, into gsum and ``out`` (see the kernel)."""
-        z = self.prev_z.reshape(self.groups, self.n)
-        s = self.prev.astype(np.float64).reshape(self.groups, self.n, STATE)
-        self.gsum[:, SUM_ABSENT] = (z == 0).sum(axis=1)
-        self.gsum[:, SUM_X:SUM_X + STATE] = (s * (z != 0)[:, :, None]).sum(axis=1)
+    def summarize(self, out: np.ndarray, side: int) -> None:
+        """Per group of prev's side ``side``: absent count, present sums, aspect counts, into ``out``."""
+        sl = slice(side * self.capacity, (side + 1) * self.capacity)
+        z = self.prev_z[sl].reshape(self.groups, self.n)
+        s = self.prev[sl].astype(np.float64).reshape(self.groups, self.n, STATE)
+        out[:, SUM_ABSENT] = (z == 0).sum(axis=1)
+        out[:, SUM_X:SUM_X + STATE] = (s * (z != 0)[:, :, None]).sum(axis=1)
         for a in range(self.k):
-            self.gsum[:, SUM_ASPECT + a] = (z == a + 1).sum(axis=1)
-        out[...] = self.gsum
+            out[:, SUM_ASPECT + a] = (z == a + 1).sum(axis=1)

@@ -21,12 +21,16 @@ def likelihood_map(d: np.ndarray, templates: np.ndarray, energy: np.ndarray, bet
     return (2.0 * lam - rho) / (2.0 * sigma_c2)
 
 
-def proposal(lmap: np.ndarray, share: float) -> tuple[np.ndarray, np.ndarray]:
-    """(cdf, log f₀/q) over the grid's cells (row-major): q = share·Λ/ΣΛ + (1 − share)/N, Λ = mean_z e^ℓ."""
-    log_l = (logsumexp(lmap, axis=0) - np.log(len(lmap))).ravel()
+def proposal(lmap: np.ndarray, share: float, support: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(cdf, log f₀/q) over the grid's cells (row-major) for f₀ uniform over the cells of ``support`` (a boolean
+    (H + h − 1, W + w − 1) mask; None: every cell): q = share·Λ/ΣΛ + (1 − share)/N over the N support cells,
+    Λ = mean_z e^ℓ, and 0 elsewhere (log f₀/q is then 0, never used)."""
+    inside = np.ones(lmap.shape[1:], bool).ravel() if support is None else np.asarray(support, bool).ravel()
+    log_l = np.where(inside, (logsumexp(lmap, axis=0) - np.log(len(lmap))).ravel(), -np.inf)
     data = np.exp(log_l - logsumexp(log_l))
-    n = data.size
-    q = share * data + (1.0 - share) / n
+    n = int(inside.sum())
+    q = np.where(inside, share * data + (1.0 - share) / n, 0.0)
     cdf = np.cumsum(q)
     cdf /= cdf[-1]
-    return cdf, -np.log(n * q)
+    with np.errstate(divide="ignore"):
+        return cdf, np.where(inside, -np.log(n * q), 0.0)

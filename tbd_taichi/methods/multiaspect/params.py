@@ -50,6 +50,9 @@ class MultiaspectParams:
                        "P(z₀ = 0) = p_absent) or paper (§4: column U[10, 20], row U[50, 70], velocity N(2, 0.1²) "
                        "px/frame, z₀ uniform on 1..K)", symbol="p(s₀), f₀", source="§4, Eq. 5",
                        choices=PRIORS)
+    entry: str = param("image", doc="image prior: where the initial law and f₀ put a target's centroid: image (the "
+                       "frame's pixels) or grid (the extended grid: also partly visible targets, which give little "
+                       "evidence either way)", source="§2, Eq. 5", choices=("image", "grid"))
     p_absent: float = param(0.5, doc="P(z₀ = 0) of the image prior", symbol="P(z₀ = 0)",
                             source="not in the paper (§4 has 0)", low=0, high=1)
     vmax: float = param(3.0, doc="image prior and f₀: each velocity U[−vmax, vmax]", unit="px/frame",
@@ -135,7 +138,8 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
         prior = law_vector((*PAPER_PRIOR["x"], *PAPER_PRIOR["y"]), PAPER_PRIOR["v_mean"], PAPER_PRIOR["v_sd"], 0.0)
         p_absent = 0.0
     else:
-        prior, p_absent = law_vector(grid, 0.0, 0.0, p.vmax), p.p_absent
+        box = (-0.5, shape[1] - 0.5, -0.5, shape[0] - 0.5) if p.entry == "image" else grid
+        prior, p_absent = law_vector(box, 0.0, 0.0, p.vmax), p.p_absent
     window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")

@@ -64,17 +64,19 @@ class MultiaspectPool:
         factor (a, b, c) and f₀'s LAW for the steps."""
         self.k.configure(np.asarray(motion, np.float32), np.asarray(f0, np.float32))
         self.k.init_prior(self.seed, float(p_absent), np.asarray(prior, np.float32))
+        self.side = 0  # the side of the kernels' prev holding the particles at n − 1
 
     def set_frames(self, y: np.ndarray, gmrf: np.ndarray) -> None:
         """The mean-removed frames (G, H, W) and their (β_h, β_v, σ_c²) rows (G, 3); computes d (Eq. 16)."""
         self.k.load(np.ascontiguousarray(y, np.float32), np.ascontiguousarray(gmrf, np.float32))
 
-    def set_births(self, share: float) -> None:
-        """The data-driven birth proposal of each group (:mod:`.births`) from its d and GMRF row."""
+    def set_births(self, share: float, support: np.ndarray | None = None) -> None:
+        """The data-driven birth proposal of each group (:mod:`.births`) from its d and GMRF row, over f₀'s
+        ``support`` cells of the extended grid (None: all)."""
         from .births import likelihood_map, proposal
 
         gpar = self.k.get("gpar").astype(float)
-        tables = [proposal(likelihood_map(self.k.d_image(g), self.templates, self.energy, *gpar[g]), share)
+        tables = [proposal(likelihood_map(self.k.d_image(g), self.templates, self.energy, *gpar[g]), share, support)
                   for g in range(self.groups)]
         self.k.put("birth_cdf", np.stack([t[0] for t in tables]))
         self.k.put("birth_lq", np.stack([t[1] for t in tables]))
@@ -86,19 +88,20 @@ class MultiaspectPool:
         first-stage weights, auxiliary indices, a fresh draw, Eq. 24's weights, post-sampling selection).
         ``data_births``: entering targets are drawn from :meth:`set_births`' proposal, weighted by f₀/q."""
         k, seed, c, b, p_a = self.k, self.seed, int(coupled), int(data_births), float(p_a)
-        k.propagate(seed, frame, 0, 0, c, b, p_a)  # with each particle's ℓ
-        k.resample(seed, frame, 0, 0, 0)
+        side = self.side
+        k.propagate(seed, frame, 0, 0, c, b, p_a, side, 0)  # with each particle's ℓ
+        k.resample(seed, frame, 0, 0, 0, side)
         if kind == "rs":
-            for sweep in range(moves):
-                k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a)
-                k.mh_move(seed, frame, sweep, int(sweep == moves - 1))
+            for sweep in range(moves):  # the MH move in the propagation; the last writes the other side
+                k.propagate(seed, frame, 1 + sweep, 1, c, b, p_a, side, 2 if sweep == moves - 1 else 1)
         else:
-            k.propagate(seed, frame, 1, 1, c, b, p_a)
-            k.resample(seed, frame, 1, 1, 1)
+            k.propagate(seed, frame, 1, 1, c, b, p_a, side, 0)
+            k.resample(seed, frame, 1, 1, 1, side)
+        self.side = 1 - side
 
     def presence(self) -> list[Presence]:
         """Each group's §3.4 output for the particles just committed."""
-        self.k.summarize(self.sums)
+        self.k.summarize(self.sums, self.side)
         out = []
         for row in self.sums:
             present = self.n - row[SUM_ABSENT]
@@ -108,4 +111,5 @@ class MultiaspectPool:
 
     def particles(self) -> dict:
         """Copies of the committed particles: state (C, 4) and aspect (C,)."""
-        return {"state": self.k.get("prev"), "aspect": self.k.get("prev_z")}
+        state, aspect = self.k.particles(self.side)
+        return {"state": state, "aspect": aspect}

@@ -20,6 +20,16 @@ EXTRA_COLUMNS = ("aspect",)
 STAGES = ("local_mean", "gmrf", "particles")
 
 
+def entry_cells(shape, template_shape, entry: str) -> np.ndarray | None:
+    """The extended grid's cells f₀ covers: those whose centroid is a pixel of the frame (``image``), or all."""
+    if entry != "image":
+        return None
+    hh, hw = (template_shape[1] - 1) // 2, (template_shape[2] - 1) // 2
+    out = np.zeros((shape[0] + 2 * hh, shape[1] + 2 * hw), bool)
+    out[hh:hh + shape[0], hw:hw + shape[1]] = True
+    return out
+
+
 def track_dtype() -> np.dtype:
     """The tracks table: TRACK_COLUMNS and ``aspect`` (1..K)."""
     return _dtype(TRACK_COLUMNS + EXTRA_COLUMNS)
@@ -43,6 +53,7 @@ class MultiaspectTracker(OneSequence):
                                     arch)
         self.pool.start(self.r.p_absent, self.r.prior_law, self.r.motion, self.r.f0_law)
         self.local_mean = LocalPlane(self.shape, self.r.mean_window)
+        self.birth_support = entry_cells(self.shape, self.r.templates.shape, self.p.entry)
         self.peaks = np.zeros(len(self.r.templates))
         self.gmrf: GmrfParams | None = None
         self.gmrf_history: list[GmrfParams] = []
@@ -89,7 +100,7 @@ class MultiaspectTracker(OneSequence):
             self.set_templates(float(np.sqrt(gmrf[2])))
         self.pool.set_frames(y[None], gmrf[None])
         if self.r.data_births:
-            self.pool.set_births(self.p.birth_share)
+            self.pool.set_births(self.p.birth_share, self.birth_support)
         self.pool.step(self.filter, self.frame, self.p.p_a, self.p.exit == "coupled", self.p.mh_moves,
                        self.r.data_births)
         est = self.pool.presence()[0]
