@@ -48,17 +48,18 @@ SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # colum
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
 
-def template_pixels(templates: np.ndarray, support: int) -> tuple:
-    """Each aspect's non-zero pixels, padded to ``support``: (rows, cols, values, counts), (K, support) arrays and
-    (K,); λ (Eq. 15) sums over them only (a vehicle fills about a third of its box)."""
+def template_pixels(templates: np.ndarray, support: int, row_length: int) -> tuple:
+    """Each aspect's non-zero pixels, padded to ``support``: (offsets, values, counts), (K, support) arrays and (K,),
+    an offset being row·``row_length`` + column from the template's corner (the padded d's rows are
+    ``row_length`` long); λ (Eq. 15) sums over them only (a vehicle fills about a third of its box)."""
     k = len(templates)
-    rows, cols = np.zeros((k, support), np.int32), np.zeros((k, support), np.int32)
-    vals, counts = np.zeros((k, support), np.float32), np.zeros(k, np.int32)
+    offsets, vals = np.zeros((k, support), np.int32), np.zeros((k, support), np.float32)
+    counts = np.zeros(k, np.int32)
     for z, t in enumerate(np.asarray(templates)):
         r, c = np.nonzero(t)
         counts[z] = len(r)
-        rows[z, :len(r)], cols[z, :len(r)], vals[z, :len(r)] = r, c, t[r, c]
-    return rows, cols, vals, counts
+        offsets[z, :len(r)], vals[z, :len(r)] = r * row_length + c, t[r, c]
+    return offsets, vals, counts
 
 
 @ti.data_oriented
@@ -83,14 +84,15 @@ class MultiaspectKernels:
         hh, hw = self.halves
         # d (Eq. 16) with a zero border of twice the half sizes: a template at any extended-grid centroid reads it
         # without bounds checks; d[g, r + PAD_R, c + PAD_C] is pixel (r, c)
-        self.d = ti.field(ti.f32, (g, h + 4 * hh, w + 4 * hw))
+        self.padded = (h + 4 * hh, w + 4 * hw)
+        self.d = ti.field(ti.f32, g * self.padded[0] * self.padded[1])  # flat: g, row, column
         self.gpar = ti.field(ti.f32, (g, len(GPAR)))
         self.motion = ti.field(ti.f32, 3)  # (a, b, c): one axis' Q Cholesky factor (w = (a·n₁, b·n₁ + c·n₂))
         self.law = ti.field(ti.f32, len(LAW))  # f₀ (Eq. 5): kernels.multiaspect.LAW
         self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))  # aspect counts while summarising (kept at 0)
         # each aspect's non-zero pixels (Eq. 8's b_kl = 1): row and column offsets from the template's corner, value;
         # tcount[z] of them, the rest unused (set_templates)
-        self.t_row, self.t_col = ti.field(ti.i32, (self.k, self.support)), ti.field(ti.i32, (self.k, self.support))
+        self.t_off = ti.field(ti.i32, (self.k, self.support))
         self.t_val = ti.field(ti.f32, (self.k, self.support))
         self.t_count = ti.field(ti.i32, self.k)
         self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
@@ -120,12 +122,18 @@ class MultiaspectKernels:
             right = y[g, r, c + 1] if c < w - 1 else 0.0
             up = y[g, r - 1, c] if r > 0 else 0.0
             down = y[g, r + 1, c] if r < h - 1 else 0.0
-            self.d[g, r + 2 * hh, c + 2 * hw] = y[g, r, c] - bh * (left + right) - bv * (up + down)
+            self.d[self.d_index(g, r + 2 * hh, c + 2 * hw)] = y[g, r, c] - bh * (left + right) - bv * (up + down)
+
+    @ti.func
+    def d_index(self, g: ti.i32, row: ti.i32, col: ti.i32) -> ti.i32:
+        """The flat index of the padded d's (row, col) in group g."""
+        hp, wp = ti.static(self.padded)
+        return (g * hp + row) * wp + col
 
     def d_image(self, g: int) -> np.ndarray:
         """Group g's d (H, W), without the border."""
         (h, w), (hh, hw) = self.shape, self.halves
-        return self.d.to_numpy()[g, 2 * hh:2 * hh + h, 2 * hw:2 * hw + w]
+        return self.d.to_numpy().reshape((self.groups,) + self.padded)[g, 2 * hh:2 * hh + h, 2 * hw:2 * hw + w]
 
     # ------------------------------------------------------------------ Eqs. 1–6
 
@@ -296,8 +304,9 @@ class MultiaspectKernels:
             c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
             r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
             lam = ti.f32(0.0)
+            corner = self.d_index(g, r + hh, c + hw)  # the template's top-left pixel in the padded d
             for i in range(self.t_count[z - 1]):
-                lam += self.t_val[z - 1, i] * self.d[g, r + self.t_row[z - 1, i] + hh, c + self.t_col[z - 1, i] + hw]
+                lam += self.t_val[z - 1, i] * self.d[corner + self.t_off[z - 1, i]]
             e0 = self.energy[0, z - 1, r + hh, c + hw]
             rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
                 - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
@@ -421,8 +430,8 @@ class MultiaspectKernels:
 
     def set_templates(self, templates: np.ndarray, energy: np.ndarray) -> None:
         """The (K, h, w) templates as their non-zero pixels (:func:`template_pixels`) and their energy tables."""
-        rows, cols, vals, counts = template_pixels(templates, self.support)
-        for name, v in (("t_row", rows), ("t_col", cols), ("t_val", vals), ("t_count", counts), ("energy", energy)):
+        offsets, vals, counts = template_pixels(templates, self.support, self.padded[1])
+        for name, v in (("t_off", offsets), ("t_val", vals), ("t_count", counts), ("energy", energy)):
             self.put(name, v)
 
     def set_particles(self, state: np.ndarray, z: np.ndarray, side: int = 0) -> None:

@@ -34,8 +34,8 @@ class MultiaspectKernels:
         self.gpar = np.zeros((g, len(GPAR)), F32)
         self.motion, self.law = np.zeros(3, F32), np.zeros(len(LAW), F32)
         self.support = th * tw
-        self.t_row, self.t_col = np.zeros((self.k, self.support), np.int32), np.zeros((self.k, self.support), np.int32)
-        self.t_val, self.t_count = np.zeros((self.k, self.support), F32), np.zeros(self.k, np.int32)
+        self.t_off, self.t_val = np.zeros((self.k, self.support), np.int32), np.zeros((self.k, self.support), F32)
+        self.t_count = np.zeros(self.k, np.int32)
         self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)
         self.gcdf = np.zeros((self.k, self.k), F32)
         self.n_cells = (h + th - 1) * (w + tw - 1)
@@ -45,7 +45,7 @@ class MultiaspectKernels:
 
     def set_templates(self, templates: np.ndarray, energy: np.ndarray) -> None:
         """The templates as their non-zero pixels and their energy tables (see the kernels)."""
-        self.t_row[...], self.t_col[...], self.t_val[...], self.t_count[...] = template_pixels(templates, self.support)
+        self.t_off[...], self.t_val[...], self.t_count[...] = template_pixels(templates, self.support, self.d.shape[2])
         self.energy[...] = energy
 
     def set_particles(self, state: np.ndarray, z: np.ndarray, side: int = 0) -> None:
@@ -185,9 +185,10 @@ class MultiaspectKernels:
             r = np.floor(self.prop[live, 2] + F32(0.5)).astype(np.int64)
             m = int(self.t_count.max())
             a = z[live] - 1
-            rows = r[:, None] + self.t_row[a, :m] + hh  # rows of the padded d under the aspect's pixels
-            cols = c[:, None] + self.t_col[a, :m] + hw
-            lam = (self.t_val[a, :m] * self.d[g[:, None], rows, cols]).sum(axis=1, dtype=F32)
+            hp, wp = self.d.shape[1:]
+            corner = (g * hp + r + hh) * wp + c + hw  # the template's top-left pixel in the flat padded d
+            flat = self.d.reshape(-1)
+            lam = (self.t_val[a, :m] * flat[corner[:, None] + self.t_off[a, :m]]).sum(axis=1, dtype=F32)
             e = self.energy[:, a, r + hh, c + hw]
             rho = e[0] - F32(2.0) * self.gpar[g, 0] * e[1] - F32(2.0) * self.gpar[g, 1] * e[2]
             out[live] = (F32(2.0) * lam - rho) / (F32(2.0) * self.gpar[g, 2])
