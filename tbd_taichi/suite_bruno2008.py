@@ -49,7 +49,7 @@ def frame_errors(tracks: np.ndarray, truth: np.ndarray, n: int) -> dict:
 def diverged(dx, dy, present) -> bool:
     """≥ DIVERGED_FRAMES of the last LAST_FRAMES frames with a target have the estimate missing or > 3 px off."""
     idx = [i for i, p in enumerate(present) if p][-LAST_FRAMES:]
-    bad = [not np.isfinite(dx[i]) or np.hypot(dx[i], dy[i]) > DIVERGED_PX for i in idx]
+    bad = [bool(not np.isfinite(dx[i]) or np.hypot(dx[i], dy[i]) > DIVERGED_PX) for i in idx]
     return sum(bad) >= DIVERGED_FRAMES
 
 

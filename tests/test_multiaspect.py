@@ -1,6 +1,7 @@
 """ma-rs and ma-apf (Bruno et al. 2008) end to end on the bruno2008 scenes: the §4 Monte Carlo conditions, detection
 from scratch and exit/re-entry with the image prior, user templates through the CLI, the engines, the thread
 count, and the registry's view of the methods."""
+import json
 import subprocess
 import sys
 
@@ -22,6 +23,7 @@ def test_section4_runs_track_the_target_in_every_frame(method):
     below 1 px), the aspect right in most frames."""
     for seed in (0, 1, 2):
         r = run_once(method, 6.5, seed)
+        json.dumps(r)  # the suite keeps its runs as JSON
         err = np.hypot(r["dx"], r["dy"])
         assert r["presence_right"] and not r["diverged"], (seed, err)
         assert np.sqrt(np.mean(err[-5:] ** 2)) < 1.5, (seed, err)

@@ -46,8 +46,8 @@ class MultiaspectParams:
     ptcr: float = param(6.5, doc="the vehicle templates' peak over the clutter: max a = 10^(PTCR/20)·σ_c, σ_c "
                         "estimated on the first frame (templates=PATH: unused)", symbol="PTCR", unit="dB",
                         source="§4", low=-20, high=60)
-    prior: str = param("image", doc="initial law and f₀: image (uniform over the extended grid, speed ≤ vmax, "
-                       "P(z₀ = 0) = p_absent) or paper (§4: column U[10, 20], row U[50, 70], velocity N(2, 0.1²) "
+    prior: str = param("image", doc="initial law and f₀: image (uniform over the frame or the extended grid, see "
+                       "entry; speed ≤ vmax; P(z₀ = 0) = p_absent) or paper (§4: column U[10, 20], row U[50, 70], velocity N(2, 0.1²) "
                        "px/frame, z₀ uniform on 1..K)", symbol="p(s₀), f₀", source="§4, Eq. 5",
                        choices=PRIORS)
     entry: str = param("image", doc="image prior: where the initial law and f₀ put a target's centroid: image (the "
