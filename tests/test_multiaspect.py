@@ -132,7 +132,9 @@ def test_divergence_and_exit_measures_by_hand():
     assert diverged([0.1, np.nan, 5.0, 0.3, 4.0, 0.1], [0] * 6, present)
     e = {"declared": [True, True, True, False, True, False, False, True, True],
          "dx": [0, 0, 0, np.nan, np.nan, np.nan, np.nan, 5.0, 0.5], "dy": [0] * 9}
-    assert exit_measures(e, 3, 7) == {"false_alarms": 1, "exit_lag": 0, "reacquire": 1}
+    assert exit_measures(e, 3, 7) == {"false_alarms": 1, "exit_lag": 0, "late_false_alarms": 1, "reacquire": 1}
+    e["declared"][3] = True  # present at the exit frame: a lag of 1, the later false alarm still counted
+    assert exit_measures(e, 3, 7) == {"false_alarms": 2, "exit_lag": 1, "late_false_alarms": 1, "reacquire": 1}
 
 
 def test_registry_lists_both_with_their_parameters():
@@ -188,6 +190,7 @@ BAD_PARAMS = [
     ("gmrf-sigma-zero", {"gmrf": "0.2,0.2,0"}, "sigma_c"),
     ("prior-unknown", {"prior": "anywhere"}, "prior"),
     ("mean-window-even", {"mean_window": 30}, "odd"),
+    ("data-births-with-paper-prior", {"births": "data", "prior": "paper"}, "births=data"),
 ]
 
 

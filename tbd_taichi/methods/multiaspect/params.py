@@ -140,6 +140,9 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
     else:
         box = (-0.5, shape[1] - 0.5, -0.5, shape[0] - 0.5) if p.entry == "image" else grid
         prior, p_absent = law_vector(box, 0.0, 0.0, p.vmax), p.p_absent
+    if p.births == "data" and p.prior == "paper":
+        raise ParameterError("births=data needs prior=image (its f₀ is uniform over cells, which the proposal's "
+                             "weight f₀/q assumes); §4's prior draws births from its own law (births=prior)")
     window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")
