@@ -49,7 +49,7 @@ def test_paired_runs_give_the_engines_each_frame_in_turn(monkeypatch):
     the next and from one run to the next; without it, one engine's whole run, then the other's."""
     calls = []
 
-    def recording_stepper(shape, snr, engine, frontend_process=False, method="sgds"):
+    def recording_stepper(shape, snr, engine, frontend_process=False, method="sgds", settings=None):
         def step(frame):
             calls.append(engine)
             return {"normalise": 1e-3}

@@ -133,7 +133,7 @@ def test_divergence_and_exit_measures_by_hand():
     e = {"declared": [True, True, True, False, True, False, False, True, True],
          "dx": [0, 0, 0, np.nan, np.nan, np.nan, np.nan, 5.0, 0.5], "dy": [0] * 9}
     assert exit_measures(e, 3, 7) == {"false_alarms": 1, "exit_lag": 0, "late_false_alarms": 1, "reacquire": 1}
-    e["declared"][3] = True  # present at the exit frame: a lag of 1, the later false alarm still counted
+    e["declared"][3:6] = [True, False, True]  # present at the exit frame (a lag of 1), a false alarm after it
     assert exit_measures(e, 3, 7) == {"false_alarms": 2, "exit_lag": 1, "late_false_alarms": 1, "reacquire": 1}
 
 
