@@ -198,7 +198,7 @@ class MultiaspectKernels:
         """Per group: cumulative weights, N sorted uniforms from N + 1 Exp(1) partial sums merged with them, the
         gather (see the kernel)."""
         v = (self.prop_ll - self.cur_ll if second_stage else self.prop_ll).reshape(self.groups, self.n)
-        cdf = np.cumsum(np.exp((v - v.max(axis=1, keepdims=True)).astype(np.float64)), axis=1)
+        cdf = np.cumsum(np.exp(v - v.max(axis=1, keepdims=True)).astype(np.float64), axis=1)  # f32 terms
         self.cdf[...] = cdf.ravel()
         self.total[...] = cdf[:, -1]
         pick = np.empty(self.capacity, np.int64)

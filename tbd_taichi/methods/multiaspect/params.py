@@ -127,6 +127,9 @@ def _fixed_gmrf(spec: str, shape) -> tuple | None:
 def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
     """The arrays and laws of ``p`` for frames of ``shape``; a bad file, stack, matrix or value is an error
     naming it."""
+    if min(shape) < 3:
+        raise ParameterError(f"frames of {shape[0]}x{shape[1]} px are too small for the multiaspect filters: "
+                             "H, W ≥ 3")
     t = _templates(p.templates)
     k, th, tw = t.shape
     if th > shape[0] or tw > shape[1]:
