@@ -57,14 +57,16 @@ class FeatureFusionKernels:
         self.template = ti.field(ti.f32, (FEATURES, self.bins))
         self.loglik, self.rho = ti.field(ti.f32, self.n), ti.field(ti.f32, self.n)
         self.fusion = ti.field(ti.f32, (self.n, FEATURES))
+        self.logw = ti.field(ti.f64, self.n)  # accumulated log-weights (slot n − 1, the estimate, unused)
         self.tables = NormalTables()
 
     # ------------------------------------------------------------------ Eqs. 12, 14–18: per-pixel maps
 
     @ti.kernel
-    def feature_maps(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), raw: ti.types.ndarray(dtype=ti.f32, ndim=3)):
-        """binmap[f] = each pixel's bin of grey (the frame), edge magnitude G and Gabor response W; ``raw`` (3, H, W)
-        gets the unquantised values (frame 0 sets the ranges from them)."""
+    def feature_maps(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), raw: ti.types.ndarray(dtype=ti.f32, ndim=3),
+                     write_raw: ti.i32):
+        """binmap[f] = each pixel's bin of grey (the frame), edge magnitude G and Gabor response W; with
+        ``write_raw``, ``raw`` (3, H, W) gets the unquantised values (frame 0 sets the ranges from them)."""
         h, w = ti.static(self.shape)
         for r, c in ti.ndrange(h, w):
             self.image[r, c] = frame[r, c]
@@ -91,7 +93,8 @@ class FeatureFusionKernels:
                 g2 += acc * acc
             values = ti.Vector([self.image[r, c], ti.sqrt(g2), gabor], dt=ti.f32)
             for f in ti.static(range(FEATURES)):
-                raw[f, r, c] = values[f]
+                if write_raw != 0:
+                    raw[f, r, c] = values[f]
                 self.binmap[f, r, c] = self.bin_of(f, values[f])
 
     @ti.func
@@ -112,8 +115,8 @@ class FeatureFusionKernels:
 
     @ti.kernel
     def weigh(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32, adaptive: ti.i32):
-        """Particles [first, first + count): histograms (Eqs. 11–13), c_i (Eq. 19), v_i (Eq. 20; ``adaptive`` = 0: grey only,
-        v = (1, 0, 0)), ρ = Σ v_i ρ_i (Eqs. 21–22) and loglik = −(1 − ρ)/(2σ_L²)."""
+        """Particles [first, first + count): histograms (Eqs. 11–13), c_i (Eq. 19), v_i (Eq. 20; ``adaptive`` = 0:
+        grey only, v = (1, 0, 0)), ρ = Σ v_i ρ_i (Eqs. 21–22) and loglik = −(1 − ρ)/(2σ_L²)."""
         h, w = ti.static(self.shape)
         for p in range(first, first + count):
             x, y = self.state[p, 0], self.state[p, 1]
@@ -177,6 +180,39 @@ class FeatureFusionKernels:
             acc += ti.sqrt(self.template[f, b] * self.hist[p, f, b])
         return acc
 
+    # ------------------------------------------------------------------ Eqs. 6, 10, 23
+
+    @ti.kernel
+    def accumulate(self, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        """In one thread, particles [0, n − 1): logw += loglik (Eq. 10 with the transition as the proposal), the
+        normalised weights, the estimate Σ w·x (Eq. 6) into slot n − 1 and N_eff = 1/Σ w² (Eq. 23);
+        out[:3] = (x̂, ŷ, N_eff)."""
+        for _ in range(1):
+            m = ti.f64(-1.0e300)
+            for p in range(self.n - 1):
+                self.logw[p] += ti.cast(self.loglik[p], ti.f64)
+                m = ti.max(m, self.logw[p])
+            total, sx, sy = ti.f64(0.0), ti.f64(0.0), ti.f64(0.0)
+            for p in range(self.n - 1):
+                self.logw[p] -= m
+                wp = ti.exp(self.logw[p])
+                total += wp
+                sx += wp * self.state[p, 0]
+                sy += wp * self.state[p, 1]
+            sq = ti.f64(0.0)
+            for p in range(self.n - 1):
+                wp = ti.exp(self.logw[p]) / total
+                sq += wp * wp
+            self.state[self.n - 1, 0] = ti.cast(sx / total, ti.f32)
+            self.state[self.n - 1, 1] = ti.cast(sy / total, ti.f32)
+            out[0], out[1], out[2] = sx / total, sy / total, 1.0 / sq
+
+    @ti.kernel
+    def peek(self, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+        """out[3] = ρ of slot n − 1 (the estimate, once weighed)."""
+        for _ in range(1):
+            out[3] = ti.cast(self.rho[self.n - 1], ti.f64)
+
     # ------------------------------------------------------------------ Eq. 1
 
     @ti.kernel
@@ -204,7 +240,7 @@ class FeatureFusionKernels:
     def put(self, name: str, values) -> None:
         """Field ``name`` ← ``values`` (its whole shape)."""
         field = getattr(self, name)
-        dtype = {ti.f32: np.float32, ti.i32: np.int32}[field.dtype]
+        dtype = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}[field.dtype]
         field.from_numpy(np.ascontiguousarray(values, dtype=dtype).reshape(field.shape))
 
     def get(self, name: str) -> np.ndarray:

@@ -138,7 +138,9 @@ def check_bench(args) -> list[str]:
     shape = validate.frame_shape("--shape", args.shape)
     spec = methods.get(args.method)
     args.settings = spec.parse_assignments(args.param)
-    params, _ = methods.checked_settings(spec, shape, {**spec.bench_keywords(args.snr), **args.settings})
+    keywords = {**spec.bench_keywords(args.snr), **args.settings}
+    keywords.pop("init_box", None)  # a box tracker's first box: make_tracker's, not a parameter
+    params, _ = methods.checked_settings(spec, shape, keywords)
     frames_as_particles = shape[0] * shape[1] * args.frames * 4 // validate.PARTICLE_BYTES  # the simulated frames
     validate.tracker_memory(f"bench --shape {shape[0]} {shape[1]} ({len(engines)} engine(s))", shape,
                             lambda: spec.particles(shape, params) * len(engines)
@@ -303,8 +305,13 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Point truth: mean EDT (Eq. 47), DSR (Eq. 48), false tracks, OSPA and Long et "
                                     "al. 2012's track detection (5 px): mean |cardinality error| per frame, P_TD, "
                                     "detection and halt frames (0-based). Box truth: detection rate, false points "
-                                    "per frame, centre error and IoU.")
-    ev.add_argument("--tracks", required=True, help="tracks CSV: frame,track_id,x,y,vx,vy,intensity,confidence")
+                                    "per frame, centre error and IoU; for a box tracker's tracks (with w,h) also "
+                                    "the OTB measures over the frames after the first labelled one (its init box): "
+                                    "mean centre location error CLE, DP@20 and DP@5 (fraction of frames with CLE "
+                                    "≤ 20, 5 px), mean IoU, success-plot AUC, scored and missed frames (a miss: "
+                                    "IoU 0, CLE 100 px).")
+    ev.add_argument("--tracks", required=True, help="tracks CSV: frame,track_id,x,y,vx,vy,intensity,confidence "
+                    "[,w,h: a box tracker's box size, x, y its centre]")
     ev.add_argument("--truth", required=True, help="truth CSV: points (frame,target_id,x,y,...) or boxes "
                     "(frame,x,y,w,h[,target_id]; x, y = the top-left corner)")
     ev.add_argument("--t0", type=number(positive, 0.0, True), default=metrics.T0, help="DSR distance threshold T0, px (default 2)")
@@ -314,7 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sequence length for the OSPA and cardinality-error averages (default: last frame in "
                          "either file + 1)")
     ev.add_argument("--json", action="store_true", help="print one JSON object (point truth: keys dsr, edt_mean, "
-                    "false_tracks, ospa, cardinality_error, p_td, detection_frame, halt_frame)")
+                    "false_tracks, ospa, cardinality_error, p_td, detection_frame, halt_frame; box truth: "
+                    "detection_rate, false_points, first_confirmation, centre_error, iou and, for tracks with w,h, "
+                    "cle, dp20, dp5, dp_curve, mean_iou, success_curve, auc, scored_frames, missed_frames)")
     ev.add_argument("--box-margin", type=number(positive, 0.0, True), default=metrics.BOX_MARGIN,
                     help="with box truth: a hit is a track point inside the box grown by this, px (default 2)")
     _common(ev)

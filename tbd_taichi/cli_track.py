@@ -266,10 +266,13 @@ def format_scores(scores: dict) -> str:
     if scores.get("truth") == "boxes":
         def px(v):
             return "n/a" if v != v else f"{v:.2f}"
+        from .otb import format_otb
+
+        otb = format_otb(scores) if "cle" in scores else []  # a box tracker's OTB measures
         return "\n".join([f"detection rate (box + {scores['box_margin']:g} px)  {scores['detection_rate']:.3f}",
                           f"false points / frame       {scores['false_points']:.3f}",
                           f"centre error (px)          {px(scores['centre_error'])}",
-                          f"IoU                        {px(scores['iou'])}"])
+                          f"IoU                        {px(scores['iou'])}"] + otb)
     return "\n".join([f"DSR (T0={scores['t0']:g} px)   {scores['dsr']:.3f}",
                       f"mean EDT (px)      {scores['edt_mean']:.3f}",
                       f"false tracks       {scores['false_tracks']}",

@@ -12,6 +12,8 @@ Inputs are the tables of :mod:`tbd_taichi.tables` (tracks and truth), in pixels.
   than the gate from every target in view in that frame.
 * OSPA (Schuhmacher et al. 2008) per frame, with cut-off c (px) and order p,
   averaged over frames 0..n_frames−1 (0 where both sets are empty).
+* Against labelled boxes: :func:`box_scores`; for a box tracker also the OTB measures (CLE, DP@20, mean IoU,
+  AUC) of :mod:`tbd_taichi.otb`.
 """
 from __future__ import annotations
 
@@ -154,6 +156,8 @@ def as_table(obj, columns: tuple[str, ...], name: str, optional: tuple[str, ...]
             n = len(np.asarray(obj[columns[0]]))
             return make_table(zip(*[np.broadcast_to(np.asarray(obj[c], float), n) for c in cols]), _dtype(cols))
         rows = np.asarray(obj, dtype=float)
+    except ParameterError:  # the columns it lacks (a ValueError too: not to be replaced by the plain message)
+        raise
     except (TypeError, ValueError):
         raise ParameterError(need) from None
     if rows.size == 0:
@@ -250,14 +254,20 @@ def truth_scores(kind: str, tracks: np.ndarray, truth: np.ndarray, n_frames: int
                  box_margin: float = BOX_MARGIN, t0: float = T0, ospa_c: float = OSPA_C,
                  ospa_p: float = OSPA_P) -> dict:
     """The report against truth of ``kind`` (:func:`~tbd_taichi.tables.read_any_truth`), with its settings, over
-    ``n_frames`` frames (default: the last frame in either table + 1): ``boxes``, :func:`box_scores`; ``points``,
+    ``n_frames`` frames (default: the last frame in either table + 1): ``boxes``, :func:`box_scores` and, for tracks
+    with w and h (box trackers), the OTB measures of :func:`tbd_taichi.otb.otb_scores`; ``points``,
     :func:`evaluate` and Long et al.'s track-detection measures (:mod:`~tbd_taichi.track_detection`, 5 px gate):
     ``cardinality_error`` (mean |tracks − targets| per frame), ``p_td`` (fraction of targets detected) and per
     target id the 0-based ``detection_frame`` and ``halt_frame`` of its track (None: not detected)."""
     frames = n_frames if n_frames is not None else \
         int(max(tracks["frame"].max(initial=-1), truth["frame"].max(initial=-1))) + 1
     if kind == "boxes":
-        return dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, frames, grow=box_margin))
+        scores = dict(truth="boxes", box_margin=box_margin, **box_scores(tracks, truth, frames, grow=box_margin))
+        from .otb import has_box_size, otb_scores
+
+        if has_box_size(tracks):
+            scores.update(otb_scores(tracks, truth))
+        return scores
     from .track_detection import track_detection
 
     scores = evaluate(tracks, truth, t0=t0, ospa_c=ospa_c, ospa_p=ospa_p, n_frames=n_frames)

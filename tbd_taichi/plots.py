@@ -63,6 +63,51 @@ def plot_tracks(max_projection: np.ndarray, tracks: np.ndarray, path, truth: np.
     plt.close(fig)
 
 
+def plot_otb_curves(results: dict, path, title: str = "") -> None:
+    """OTB precision plot (fraction of frames with centre error ≤ t, t = 0..50 px) beside the success plot
+    (fraction with IoU > t, t = 0..1), one line per tracker, written to ``path`` (PNG, PDF or SVG by its suffix).
+    ``results``: {label: scores with ``dp_curve`` and ``success_curve``, as :func:`tbd_taichi.otb.otb_scores`
+    gives them}; the legends carry DP@20 and AUC, OTB's ranking values."""
+    from .errors import ParameterError
+    from .otb import DP_THRESHOLDS, SUCCESS_THRESHOLDS
+    from .validate import output_path
+
+    if not isinstance(results, dict) or not results:
+        raise ParameterError("results must be a non-empty dict {label: OTB scores (tbd_taichi.otb.otb_scores)}")
+    curves = {}
+    for label, scores in results.items():
+        try:
+            dp, success = (np.asarray(scores[k], float) for k in ("dp_curve", "success_curve"))
+        except (KeyError, TypeError, ValueError, IndexError):
+            dp = success = None
+        if dp is None or dp.shape != DP_THRESHOLDS.shape or success.shape != SUCCESS_THRESHOLDS.shape:
+            raise ParameterError(f"results[{label!r}] needs dp_curve ({len(DP_THRESHOLDS)} values) and "
+                                 f"success_curve ({len(SUCCESS_THRESHOLDS)} values), as otb_scores gives them")
+        curves[str(label)] = (dp, success)
+    path = output_path("path", path, (".png", ".pdf", ".svg"))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (pre, suc) = plt.subplots(1, 2, figsize=(11, 4.5))
+    for label, (dp, success) in curves.items():
+        pre.plot(DP_THRESHOLDS, dp, lw=2, label=f"{label} [{dp[20]:.3f}]")
+        suc.plot(SUCCESS_THRESHOLDS, success, lw=2, label=f"{label} [{success.mean():.3f}]")
+    pre.set(xlabel="location error threshold (px)", ylabel="precision", title="precision plot (DP@20 in [])",
+            xlim=(0, DP_THRESHOLDS[-1]), ylim=(0, 1.02))
+    suc.set(xlabel="overlap threshold", ylabel="success rate", title="success plot (AUC in [])", xlim=(0, 1),
+            ylim=(0, 1.02))
+    for ax in (pre, suc):
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right" if ax is pre else "lower left", fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> int:
     """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail; returns frames written."""
     path = Path(path)

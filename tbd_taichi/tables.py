@@ -4,7 +4,7 @@ Coordinates everywhere: x = column, y = row, 0-based, pixel centres at integers;
 ``frame`` is the 0-based index into the input sequence.
 
 * tracks: ``frame,track_id,x,y,vx,vy,intensity,confidence`` — one row per
-  confirmed track per frame;
+  confirmed track per frame (a box tracker's add ``w,h``, the box size, x, y being its centre);
 * truth: ``frame,target_id,x,y,vx,vy,intensity`` — one row per target per frame
   in which it is in view (the long2012 simulator's adds ``model``, an index into
   ``motion_models.MODELS``; the bruno2008 simulator's ``aspect``, the template 1..K).
@@ -21,6 +21,7 @@ from .errors import InputError
 
 TRACK_COLUMNS = ("frame", "track_id", "x", "y", "vx", "vy", "intensity", "confidence")
 TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
+BOX_SIZE_COLUMNS = ("w", "h")  # a box tracker's tracks carry these after TRACK_COLUMNS: box size, px
 BOX_COLUMNS = ("frame", "x", "y", "w", "h")  # labelled target boxes (drone-ir): corner x = column, y = row
 INTEGER_COLUMNS = ("frame", "track_id", "target_id", "model", "aspect")  # int64 in a table, written without decimals
 
@@ -133,8 +134,10 @@ def read_csv(path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> 
 
 
 def read_tracks(path) -> np.ndarray:
-    """Tracks CSV ``frame,track_id,x,y,vx,vy,intensity,confidence``."""
-    return read_csv(path, TRACK_COLUMNS)
+    """Tracks CSV ``frame,track_id,x,y,vx,vy,intensity,confidence``, plus the box size ``w,h`` (px; x, y are then
+    the box centre) when the file has both, as a box tracker's has; other columns are not read."""
+    optional = BOX_SIZE_COLUMNS if set(BOX_SIZE_COLUMNS) <= set(read_header(path)) else ()
+    return read_csv(path, TRACK_COLUMNS, optional)
 
 
 def read_truth(path) -> np.ndarray:

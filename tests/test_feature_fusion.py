@@ -34,7 +34,7 @@ def maps(pools, frame):
     out = []
     for k in pools:
         raw = np.zeros((3,) + frame.shape, np.float32)
-        k.feature_maps(frame, raw)
+        k.feature_maps(frame, raw, 1)
         out.append(raw)
     return out
 
@@ -105,7 +105,7 @@ def test_histogram_by_hand_on_a_tiny_window():
     for k in pools:
         k.put("ranges", np.array([[0, 100], [0, 1e6], [-1e6, 1e6]], np.float32))
         raw = np.zeros((3,) + shape, np.float32)
-        k.feature_maps(frame, raw)
+        k.feature_maps(frame, raw, 1)
         k.put("state", np.array([[4.0, 4.0, 0, 0]], np.float32))
         k.weigh(0, 1, 1.5, 1.5, 0.15, 0)
         weights = {(dr, dc): 1 - (dr * dr + dc * dc) / 4.5 for dr in (-1, 0, 1) for dc in (-1, 0, 1)}

@@ -125,7 +125,7 @@ class FeatureFusionTracker(OneSequence):
         self.k.put("col_taps", col)
         self.raw = np.zeros((FEATURES,) + self.shape, np.float32)
         self.centre = np.array([x + w / 2.0, y + h / 2.0])  # the box centre, as drone-ir's cx, cy
-        self.logw = np.full(self.n, -math.log(self.n))
+        self.summary = np.zeros(4)  # x̂, ŷ, N_eff, ρ at the estimate
         self.rows: list[tuple] = []
         self.frame = 0
         self.resampled: list[int] = []
@@ -145,13 +145,14 @@ class FeatureFusionTracker(OneSequence):
 
     def _start(self, frame: np.ndarray) -> None:
         """Frame 0: the bins' ranges, the template histograms at the box centre (Eq. 12) and the particles."""
-        self.k.feature_maps(frame, self.raw)
+        self.k.feature_maps(frame, self.raw, 1)
         lo, hi = np.percentile(self.raw.reshape(FEATURES, -1), RANGE_PERCENTILES, axis=1)
         self.k.put("ranges", np.stack([lo, np.maximum(hi, lo + 1e-6)], axis=1))
         self.k.rebin(self.raw)
         state = np.zeros((self.n + 1, 4), np.float32)
         state[self.n, :2] = self.centre
         self.k.put("state", state)
+        self.k.put("logw", np.zeros(self.n + 1))  # fields may come from a finished tracker (backend.reusable)
         self._weigh(self.n, 1)
         self.k.put("template", self.k.get("hist")[self.n])
         i = np.arange(self.n)
@@ -172,23 +173,17 @@ class FeatureFusionTracker(OneSequence):
             self.frame += 1
             self.seconds["features"] += time.perf_counter() - t0
             return self.rows[-1:]
-        self.k.feature_maps(z, self.raw)
+        self.k.feature_maps(z, self.raw, 0)
         t1 = time.perf_counter()
         self.k.propagate(self.seed, self.frame, self.p.sigma_q, int(self.p.motion == "constant-velocity"))
         self._weigh(0, self.n)
-        self.logw += self.k.get("loglik")[:self.n]  # Eq. 10 with the transition as the proposal
-        self.logw -= self.logw.max()
-        w = np.exp(self.logw)
-        w /= w.sum()
-        state = self.k.get("state")
-        estimate = w @ state[:self.n, :2]  # Eq. 6
-        state[self.n, :2] = estimate
-        self.k.put("state", state)
+        self.k.accumulate(self.summary)  # Eqs. 10, 6, 23: the estimate goes to slot N
         self._weigh(self.n, 1)
-        rho = float(self.k.get("rho")[self.n])
+        self.k.peek(self.summary)
+        estimate, neff, rho = self.summary[:2].copy(), self.summary[2], float(self.summary[3])
         t2 = time.perf_counter()
-        if 1.0 / np.sum(w * w) < self.p.n_th * self.n:  # Eq. 23
-            self._resample(state, w)
+        if neff < self.p.n_th * self.n:  # Eq. 23
+            self._resample()
         last = self.centre
         self.centre = estimate
         self.seconds["features"] += t1 - t0
@@ -198,8 +193,11 @@ class FeatureFusionTracker(OneSequence):
         self.frame += 1
         return self.rows[-1:]
 
-    def _resample(self, state: np.ndarray, w: np.ndarray) -> None:
+    def _resample(self) -> None:
         """§3.3: residual resampling, then (improved) the new particles of Eqs. 24–25; weights 1/N."""
+        state, logw = backend.to_host(self.k.state), backend.to_host(self.k.logw)[:self.n]  # fast typed copies
+        w = np.exp(logw - logw.max())
+        w /= w.sum()
         u = uniform(self.seed, self.frame, S_RESAMPLE, np.arange(self.n)).astype(np.float64)
         parents = residual_resample(w, u)
         new = state[parents].copy()
@@ -213,8 +211,8 @@ class FeatureFusionTracker(OneSequence):
         state[:self.n] = new[:self.n]
         state[:self.n, 0] = np.clip(state[:self.n, 0], 0, self.shape[1] - 1)
         state[:self.n, 1] = np.clip(state[:self.n, 1], 0, self.shape[0] - 1)
-        self.k.put("state", state)
-        self.logw[:] = -math.log(self.n)
+        backend.from_host(self.k.state, state)
+        backend.from_host(self.k.logw, np.zeros(self.n + 1))
         self.resampled.append(self.frame)
 
     def _row(self, centre, velocity, rho: float, frame: np.ndarray) -> tuple:
@@ -242,6 +240,24 @@ def clipped_box(box, shape) -> tuple[float, float, float, float]:
     return x0, y0, x1 - x0, y1 - y0
 
 
+BENCH_BOX = (15.5, 15.5, 9.0, 9.0)  # the bench scene's first-frame box (x, y, w, h)
+
+
+def bench_frames(shape, n_frames: int, seed: int = 0) -> np.ndarray:
+    """``tbd-taichi bench``'s frames: an 8-bit-like textured 9×9 target starting in BENCH_BOX and moving
+    (1.5, 1) px a frame over smooth background and noise."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    frames = 60 + 20 * np.sin(xx / 37.0) * np.cos(yy / 23.0) + rng.normal(0, 4, (n_frames, h, w))
+    patch = 120 + 40 * rng.random((9, 9))
+    for t in range(n_frames):
+        x0 = int(round(BENCH_BOX[0] + 0.5 + 1.5 * t)) % max(w - 9, 1)
+        y0 = int(round(BENCH_BOX[1] + 0.5 + 1.0 * t)) % max(h - 9, 1)
+        frames[t, y0:y0 + 9, x0:x0 + 9] = patch
+    return frames.astype(np.float32)
+
+
 def _factory(shape, params, *, seed: int, engine: str, arch, init_box=None, **options):
     import dataclasses
 
@@ -257,6 +273,7 @@ SPEC = MethodSpec(
     params=FeatureFusionParams, factory=_factory, make_params=feature_fusion_params, needs_init_box=True,
     scenario="huo2022", min_frames=2, aliases={"particles": "n_particles"}, rank=5,
     particle_count=lambda shape, params: params.n_particles, extra_columns=lambda params: EXTRA_COLUMNS,
+    bench_settings=lambda snr: {"init_box": BENCH_BOX}, bench_frames=bench_frames,
     assumes="one target whose first-frame box is given; it keeps its size and roughly its appearance, moving "
             "≤ ~3σ_q = 12 px a frame",
 )

@@ -34,6 +34,7 @@ class FeatureFusionKernels:
         self.template = np.zeros((FEATURES, self.bins), F32)
         self.loglik, self.rho = np.zeros(self.n, F32), np.zeros(self.n, F32)
         self.fusion = np.zeros((self.n, FEATURES), F32)
+        self.logw = np.zeros(self.n)
 
     def put(self, name: str, values) -> None:
         target = getattr(self, name)
@@ -47,8 +48,8 @@ class FeatureFusionKernels:
         b = np.floor((raw - lo) / np.maximum(hi - lo, F32(1e-12)) * F32(self.bins)).astype(np.int64)
         return np.clip(b, 0, self.bins - 1).astype(np.int32)
 
-    def feature_maps(self, frame: np.ndarray, raw: np.ndarray) -> None:
-        """Grey, Sobel magnitude and Gabor maps into ``raw``, their bins into binmap (see the kernel)."""
+    def feature_maps(self, frame: np.ndarray, raw: np.ndarray, write_raw: int) -> None:
+        """Grey, Sobel magnitude and Gabor maps (into ``raw`` with ``write_raw``), their bins into binmap."""
         image = np.asarray(frame, F32)
         rowpass = sum((self.row_taps[k + self.gx] * _shifted(image, 0, k) for k in range(-self.gx, self.gx + 1)),
                       np.zeros_like(image))
@@ -62,8 +63,10 @@ class FeatureFusionKernels:
                     if kernel[a][b]:
                         acc += F32(kernel[a][b]) * _shifted(image, a - 1, b - 1)
             g2 += acc * acc
-        raw[...] = np.stack([image, np.sqrt(g2), gabor])
-        self.binmap[...] = self._bins(raw)
+        values = np.stack([image, np.sqrt(g2), gabor])
+        if write_raw:
+            raw[...] = values
+        self.binmap[...] = self._bins(values)
 
     def rebin(self, raw: np.ndarray) -> None:
         self.binmap[...] = self._bins(np.asarray(raw, F32))
@@ -109,6 +112,21 @@ class FeatureFusionKernels:
         rho = (v * rhos).sum(axis=1)
         self.fusion[sl], self.rho[sl] = v, rho
         self.loglik[sl] = -(F32(1.0) - rho) / (F32(2.0) * F32(sigma_l) ** 2)
+
+    def accumulate(self, out: np.ndarray) -> None:
+        """Eq. 10's weights, Eq. 6's estimate into the last slot, Eq. 23's N_eff (see the kernel)."""
+        m = self.n - 1
+        self.logw[:m] += self.loglik[:m].astype(np.float64)
+        self.logw[:m] -= self.logw[:m].max()
+        w = np.exp(self.logw[:m])
+        total = w.sum()
+        x, y = (w * self.state[:m, 0]).sum() / total, (w * self.state[:m, 1]).sum() / total
+        self.state[m, 0], self.state[m, 1] = x, y
+        out[:3] = (x, y, 1.0 / ((w / total) ** 2).sum())
+
+    def peek(self, out: np.ndarray) -> None:
+        """out[3] = ρ of the last slot."""
+        out[3] = self.rho[self.n - 1]
 
     def propagate(self, seed: int, frame: int, sigma_q: float, velocity: int) -> None:
         """Eq. 1's random walk (or constant velocity), clamped to the frame (see the kernel)."""
