@@ -109,7 +109,8 @@ def plot_otb_curves(results: dict, path, title: str = "") -> None:
 
 
 def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> int:
-    """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail; returns frames written."""
+    """Video of ``frames`` (an iterable of float (H, W)) with each track's box (its w × h for box trackers, else a
+    fixed marker), id and trail; returns frames written."""
     path = Path(path)
     writer = None
     by_frame: dict[int, np.ndarray] = {}
@@ -130,8 +131,9 @@ def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> 
             pts = np.stack([trail["x"], trail["y"]], axis=1).round().astype(np.int32)
             cv2.polylines(img, [pts], False, colour, 1)
             x, y = int(round(row["x"])), int(round(row["y"]))
-            cv2.rectangle(img, (x - BOX, y - BOX), (x + BOX, y + BOX), colour, 1)
-            cv2.putText(img, str(tid), (x + BOX + 1, y - BOX), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
+            bw, bh = (int(round(row["w"] / 2)), int(round(row["h"] / 2))) if "w" in tracks.dtype.names else (BOX, BOX)
+            cv2.rectangle(img, (x - bw, y - bh), (x + bw, y + bh), colour, 1)
+            cv2.putText(img, str(tid), (x + bw + 1, y - bh), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
         writer.write(img)
         n += 1
     if writer is not None:
