@@ -43,9 +43,10 @@ def check_simulate(args) -> None:
     from .simulate import check_memory
 
     own = {"jia2022": ("--shape", "--frames", "--snr"), "long2012": ("--case", "--snr-db"),
-           "bruno2008": ("--ptcr", "--exit-reentry", "--frames")}
+           "bruno2008": ("--ptcr", "--exit-reentry", "--frames"), "huo2022": ("--sequence", "--frames")}
     given = {"--shape": args.shape, "--frames": args.frames, "--snr": args.snr, "--case": args.case,
-             "--snr-db": args.snr_db, "--ptcr": args.ptcr, "--exit-reentry": args.exit_reentry or None}
+             "--snr-db": args.snr_db, "--ptcr": args.ptcr, "--exit-reentry": args.exit_reentry or None,
+             "--sequence": args.sequence}
     for flag, value in given.items():
         if value is not None and flag not in own[args.scenario]:
             owners = " or ".join(s for s, flags in own.items() if flag in flags)
@@ -60,6 +61,11 @@ def check_simulate(args) -> None:
 
         check_bruno2008(PTCRS[0] if args.ptcr is None else args.ptcr, args.frames, args.exit_reentry)
         check_memory(SHAPE, MIN_REENTRY_FRAMES if args.exit_reentry else args.frames or FRAMES)
+    elif args.scenario == "huo2022":
+        from . import huo2022
+
+        huo2022.check_huo2022(args.sequence or "fast", args.frames)
+        check_memory(huo2022.SHAPE, args.frames or huo2022.FRAMES)
     else:
         missing = [f for f, v in (("--shape", args.shape), ("--frames", args.frames), ("--snr", args.snr)) if v is None]
         if missing:
@@ -88,6 +94,11 @@ def cmd_simulate(args) -> int:
         what = f"Bruno et al. 2008, PTCR {ptcr:g} dB" + (
             f", exit at frame {scene.params['exit_frame']}, re-entry at {scene.params['entry_frame']}"
             if args.exit_reentry else "")
+    elif args.scenario == "huo2022":
+        from .huo2022 import simulate_huo2022
+
+        scene = simulate_huo2022(args.sequence or "fast", seed=args.seed, frames=args.frames)
+        what = f"Huo et al. 2022's {args.sequence or 'fast'} sequence, box truth"
     else:
         scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
                          seed=args.seed, motion=args.motion)
@@ -274,9 +285,12 @@ def build_parser() -> argparse.ArgumentParser:
                                      "or a multiaspect extended target in GMRF clutter on a smooth local mean, Bruno et al. 2008 Eqs. 1-9 and §4 (--scenario bruno2008 [--ptcr] [--exit-reentry]). "
                                      "Writes OUT (.npz with arrays 'frames' and 'truth'; bruno2008 adds 'local_mean') and OUT_truth.csv beside it "
                                      "(bruno2008 adds an integer 'aspect' column, 1-4).")
-    sim.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008"), default="jia2022",
+    sim.add_argument("--sequence", choices=("weak", "complex", "fast", "rotating"), default=None,
+                     help="huo2022: a sequence after Huo et al.'s Table 1 (default fast)")
+    sim.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008", "huo2022"), default="jia2022",
                      help="jia2022: SGDS-PF's targets (default); long2012: Long et al. 2012's §5 scenes (--case); "
-                          "bruno2008: Bruno et al. 2008's §4 scene, 120x120 (--ptcr, --exit-reentry, --frames)")
+                          "bruno2008: Bruno et al. 2008's §4 scene, 120x120 (--ptcr, --exit-reentry, --frames); "
+                          "huo2022: box-truth sequences after Huo et al. 2022's Table 1 (--sequence, --frames)")
     sim.add_argument("--case", choices=("5.1", "5.2", "5.3"), default=None,
                      help="long2012: 5.1 one CV target, 5.2 three manoeuvring targets (default), 5.3 three launches")
     sim.add_argument("--ptcr", type=number(positive, -20.0), default=None, metavar="DB",

@@ -1,0 +1,56 @@
+"""The huo2022 scenario (box truth after Huo et al. 2022's Table 1) and feature-fusion on it."""
+import numpy as np
+import pytest
+
+import tbd_taichi as tbd
+from tbd_taichi import cli, tables
+from tbd_taichi.errors import ParameterError
+from tbd_taichi.huo2022 import SEQUENCES, simulate_huo2022
+from tbd_taichi.otb import otb_scores
+
+
+@pytest.mark.parametrize("sequence", SEQUENCES)
+def test_frames_and_boxes(sequence):
+    sc = simulate_huo2022(sequence, seed=3, frames=30)
+    assert sc.frames.shape == (30, 256, 256) and sc.frames.dtype == np.float32
+    assert sc.frames.min() >= 0 and sc.frames.max() <= 255
+    assert len(sc.truth) == 30 and np.all(sc.truth["w"] >= 2) and np.all(sc.truth["h"] >= 2)
+    # the box holds the target: its pixels are brighter than the area around it, on average over the frames
+    # (a weak target's contrast is 3σ of the noise; the background is smooth at this scale)
+    excess = []
+    for t in sc.truth:
+        r0, c0, h, w = int(t["y"] + 0.5), int(t["x"] + 0.5), int(t["h"]), int(t["w"])
+        f = sc.frames[int(t["frame"])]
+        excess.append(f[r0:r0 + h, c0:c0 + w].mean() - f[r0 - 6:r0 + h + 6, c0 - 6:c0 + w + 6].mean())
+    assert np.mean(excess) > (3 if sequence in ("weak", "complex") else 20), np.mean(excess)
+    np.testing.assert_array_equal(sc.frames, simulate_huo2022(sequence, seed=3, frames=30).frames)
+
+
+def test_fast_grows_and_moves_fast():
+    sc = simulate_huo2022("fast", seed=0, frames=120)
+    assert sc.truth["w"][-1] > sc.truth["w"][0]
+    step = np.hypot(np.diff(sc.truth["x"]), np.diff(sc.truth["y"]))
+    assert np.median(step) > 2 and step.max() > 8  # fast, with jumps
+
+
+@pytest.mark.parametrize("sequence", ["fast", "rotating"])
+def test_feature_fusion_holds_the_target(sequence):
+    """Measured: CLE 1.6 and 0.4 px, DP@20 1.0 (the fused features); the box keeps the init size, so IoU is low
+    on the growing target."""
+    sc = simulate_huo2022(sequence, seed=0, frames=120)
+    b = sc.truth[0]
+    tracks = tbd.track(sc.frames, method="feature-fusion", init_box=(b["x"], b["y"], b["w"], b["h"]), seed=0)
+    scores = otb_scores(tracks, sc.truth)
+    assert scores["cle"] < 3 and scores["dp20"] > 0.95, scores
+
+
+def test_simulate_cli_writes_frames_and_box_truth(tmp_path, capsys):
+    out = tmp_path / "h.npz"
+    assert cli.main(["simulate", "--scenario", "huo2022", "--sequence", "rotating", "--frames", "5",
+                     "--out", str(out)]) == 0
+    boxes = tables.read_boxes(tmp_path / "h_truth.csv")
+    assert len(boxes) == 5 and np.load(out)["frames"].shape == (5, 256, 256)
+    assert cli.main(["simulate", "--scenario", "huo2022", "--ptcr", "3", "--out", str(out)]) == 2
+    assert "--ptcr applies to --scenario bruno2008" in capsys.readouterr().err
+    with pytest.raises(ParameterError, match="sequence"):
+        simulate_huo2022("blurry")
