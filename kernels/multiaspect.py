@@ -44,7 +44,8 @@ LAW = ("x0", "x1", "y0", "y1", "v_mean", "v_sd", "v_spread")  # f₀ and the pri
 # per axis v_mean + v_sd·n + v_spread·(2u − 1)
 GPAR = ("beta_h", "beta_v", "sigma_c2")
 N_LAW, N_GPAR = len(LAW), len(GPAR)
-SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # columns of gsum; aspects from SUM_ASPECT
+SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # columns of summarize's output; aspects
+# from SUM_ASPECT
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
 
@@ -90,7 +91,6 @@ class MultiaspectKernels:
         self.gpar = ti.field(ti.f32, (g, len(GPAR)))
         self.motion = ti.field(ti.f32, 3)  # (a, b, c): one axis' Q Cholesky factor (w = (a·n₁, b·n₁ + c·n₂))
         self.law = ti.field(ti.f32, len(LAW))  # f₀ (Eq. 5): kernels.multiaspect.LAW
-        self.gsum = ti.field(ti.f64, (g, SUM_ASPECT + self.k))  # aspect counts while summarising (kept at 0)
         # each aspect's non-zero pixels (Eq. 8's b_kl = 1): row and column offsets from the template's corner, value;
         # tcount[z] of them, the rest unused (set_templates)
         self.t_off = ti.field(ti.i32, (self.k, self.support))
@@ -415,19 +415,21 @@ class MultiaspectKernels:
                 g = it // span
                 absent = ti.f64(0.0)
                 sums = ti.Vector([0.0] * STATE, dt=ti.f64)
+                counts = ti.Vector([0.0] * self.k, dt=ti.f64)
                 for p in range(g * self.n + side * self.capacity, (g + 1) * self.n + side * self.capacity):
                     z = self.prev_z[p]
                     if z == 0:
                         absent += 1.0
                     else:
                         sums += ti.Vector([self.prev[p, d] for d in ti.static(range(STATE))], dt=ti.f64)
-                        self.gsum[g, SUM_ASPECT + z - 1] += 1.0
+                        for a in ti.static(range(self.k)):
+                            if z == a + 1:
+                                counts[a] += 1.0
                 out[g, SUM_ABSENT] = absent
                 for d in ti.static(range(STATE)):
                     out[g, SUM_X + d] = sums[d]
-                for a in range(self.k):
-                    out[g, SUM_ASPECT + a] = self.gsum[g, SUM_ASPECT + a]
-                    self.gsum[g, SUM_ASPECT + a] = 0.0
+                for a in ti.static(range(self.k)):
+                    out[g, SUM_ASPECT + a] = counts[a]
 
     # ------------------------------------------------------------------ host transfers
 

@@ -29,8 +29,8 @@ from scipy import ndimage
 
 from .errors import ParameterError
 from .gmrf import sample_gmrf
-from .multiaspect import (PAPER_PRIOR, PAPER_Q, PAPER_T, PAPER_ZETA, aspect_transition, check_templates, half_sizes,
-                          motion_noise, noise_factor, quantise)
+from .multiaspect import (PAPER_PRIOR, PAPER_Q, PAPER_T, PAPER_ZETA, aspect_transition, check_templates, extended_grid,
+                          half_sizes, motion_noise, noise_factor, quantise)
 from .simulate import Scenario
 from .tables import TRUTH_COLUMNS, _dtype, make_table
 
@@ -106,11 +106,9 @@ def local_mean(rng: np.random.Generator, shape=SHAPE) -> np.ndarray:
 
 
 def _on_grid(x: float, y: float, shape, halves) -> bool:
-    """Whether the quantised centroid (Eq. 3) lies on the extended grid: columns −h_w … W − 1 + h_w, rows
-    −h_h … H − 1 + h_h."""
-    (h, w), (hh, hw) = shape, halves
-    qx, qy = quantise(x), quantise(y)
-    return bool(-hw <= qx <= w - 1 + hw and -hh <= qy <= h - 1 + hh)
+    """Whether the quantised centroid (Eq. 3) lies on the extended grid (``multiaspect.extended_grid``'s box)."""
+    x0, x1, y0, y1 = extended_grid(shape, halves)
+    return bool(x0 <= x < x1 and y0 <= y < y1)
 
 
 def target_path(rng: np.random.Generator, n_frames: int, shape, halves, G, prior=PAPER_PRIOR,

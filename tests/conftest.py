@@ -1,4 +1,6 @@
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -19,3 +21,20 @@ def taichi_runtime():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def csv_by_threads(tmp_path):
+    """``run(frames, *track_args)``: ``python -m tbd_taichi track`` on the frames (saved as .npy) with 1 and with 2
+    CPU threads; the two tracks CSVs' bytes (the same, where the kernels are thread-count independent)."""
+    def run(frames, *args):
+        source = tmp_path / "threads_input.npy"
+        np.save(source, frames)
+        outs = []
+        for threads in (1, 2):
+            out = tmp_path / f"threads{threads}.csv"
+            subprocess.run([sys.executable, "-m", "tbd_taichi", "track", str(source), *args, "--threads", str(threads),
+                            "--out", str(out), "--progress", "off"], check=True, capture_output=True)
+            outs.append(out.read_bytes())
+        return outs
+    return run

@@ -1,8 +1,6 @@
 """feature-fusion (Huo et al. 2022): the kernels against their NumPy twin and references (Sobel and Gabor against
 cv2.filter2D, histograms, Eqs. 19–22 on identical windows), residual resampling and Eqs. 24–25, and end to end
 on a drone-ir clip from its first labelled box."""
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -164,17 +162,10 @@ def test_engines_follow_the_same_target(clip):
 
 
 @pytest.mark.slow
-def test_same_csv_with_one_and_two_threads(tmp_path, clip):
+def test_same_csv_with_one_and_two_threads(csv_by_threads, clip):
     frames, boxes = clip
     b = boxes[0]
-    np.save(tmp_path / "c.npy", frames[:30])
-    outs = []
-    for threads in (1, 2):
-        out = tmp_path / f"t{threads}.csv"
-        subprocess.run([sys.executable, "-m", "tbd_taichi", "track", str(tmp_path / "c.npy"), "--method",
-                        "feature-fusion", "--init-box", f"{b['x']},{b['y']},{b['w']},{b['h']}", "--threads",
-                        str(threads), "--out", str(out), "--progress", "off"], check=True, capture_output=True)
-        outs.append(out.read_bytes())
+    outs = csv_by_threads(frames[:30], "--method", "feature-fusion", "--init-box", f"{b['x']},{b['y']},{b['w']},{b['h']}")
     assert outs[0] == outs[1] and outs[0].count(b"\n") == 31
 
 

@@ -4,8 +4,6 @@ and on noise, the CSV contract, reproducibility across thread counts and the eng
 Thresholds are what the defaults reliably meet on these seeds (the Monte Carlo figures are in
 docs/results/long2012/long2012.md); each is well below the mean so that a change that breaks the filter, not
 noise, fails them."""
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -136,18 +134,10 @@ def test_engines_agree():
 
 
 @pytest.mark.slow
-def test_same_tracks_with_one_and_two_threads(tmp_path):
+def test_same_tracks_with_one_and_two_threads(csv_by_threads):
     """The same CSV, byte for byte, with 1 and with 2 CPU threads (counter-based random numbers, group sums in
     one thread each)."""
-    sc = simulate_long2012("5.2", seed=2)
-    np.save(tmp_path / "s.npy", sc.frames)
-    outs = []
-    for threads in (1, 2):
-        out = tmp_path / f"t{threads}.csv"
-        subprocess.run([sys.executable, "-m", "tbd_taichi", "track", str(tmp_path / "s.npy"), "--method", "mm-phd",
-                        "--threads", str(threads), "--out", str(out), "--progress", "off"], check=True,
-                       capture_output=True)
-        outs.append(out.read_bytes())
+    outs = csv_by_threads(simulate_long2012("5.2", seed=2).frames, "--method", "mm-phd")
     assert outs[0] == outs[1] and outs[0].count(b"\n") > 10
 
 

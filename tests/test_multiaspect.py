@@ -2,8 +2,6 @@
 from scratch and exit/re-entry with the image prior, user templates through the CLI, the engines, the thread
 count, and the registry's view of the methods."""
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -89,16 +87,8 @@ def test_engines_agree():
 
 
 @pytest.mark.slow
-def test_same_csv_with_one_and_two_threads(tmp_path):
-    sc = simulate_bruno2008(seed=4, ptcr_db=6.5, frames=15)
-    np.save(tmp_path / "s.npy", sc.frames)
-    outs = []
-    for threads in (1, 2):
-        out = tmp_path / f"t{threads}.csv"
-        subprocess.run([sys.executable, "-m", "tbd_taichi", "track", str(tmp_path / "s.npy"), "--method", "ma-rs",
-                        "--threads", str(threads), "--out", str(out), "--progress", "off"], check=True,
-                       capture_output=True)
-        outs.append(out.read_bytes())
+def test_same_csv_with_one_and_two_threads(csv_by_threads):
+    outs = csv_by_threads(simulate_bruno2008(seed=4, ptcr_db=6.5, frames=15).frames, "--method", "ma-rs")
     assert outs[0] == outs[1] and outs[0].count(b"\n") > 5
 
 
@@ -227,3 +217,13 @@ def test_a_nan_frame_is_refused_at_update():
     frame[3, 4] = np.nan
     with pytest.raises(InputError, match="frame 0"):
         tracker.update(frame)
+
+
+def test_paper_coordinates_convert_once_and_back():
+    """The paper's x is the row, counted from 1 (Eqs. 8, 15): its frame-1 centroid (65, 23) is column 22, row 64."""
+    from tbd_taichi.multiaspect import paper_to_project, project_to_paper
+
+    x, y = paper_to_project(65, 23)
+    assert (float(x), float(y)) == (22.0, 64.0)
+    xs, ys = np.array([0.0, 10.5, 119.0]), np.array([3.0, 0.0, 7.25])
+    np.testing.assert_array_equal(np.array(paper_to_project(*project_to_paper(xs, ys))), np.array([xs, ys]))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,8 +84,7 @@ class Resolved:
     relative: bool  # templates in units of 10^(PTCR/20)·σ_c (the vehicle) rather than the input's
     G: np.ndarray  # (K, K) column-stochastic
     motion: tuple  # (a, b, c): one axis' Q Cholesky factor, px and px/frame
-    prior_law: np.ndarray  # LAW vector of the initial draw
-    f0_law: np.ndarray  # LAW vector of an entering target (Eq. 5)
+    prior_law: np.ndarray  # LAW vector of the initial draw, and of an entering target (f₀, Eq. 5): the same law
     p_absent: float  # P(z₀ = 0)
     mean_window: int
     fixed_gmrf: tuple | None  # (β_h, β_v, σ_c²) or None: estimated every frame
@@ -149,7 +147,7 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
     window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")
-    return Resolved(t, p.templates == "vehicle", g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior, prior.copy(),
+    return Resolved(t, p.templates == "vehicle", g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior,
                     p_absent, window, _fixed_gmrf(p.gmrf, shape),
                     p.births == "data" or (p.births == "auto" and p.prior == "image"))
 
@@ -165,7 +163,3 @@ def particles(kind: str, p: MultiaspectParams) -> int:
     """N_p: the configured count or the paper's for filter ``kind`` (rs, apf)."""
     return p.n_particles or PAPER_PARTICLES[kind]
 
-
-def position_sd(p: MultiaspectParams) -> float:
-    """The per-step position noise sd (px) of Eq. 4."""
-    return math.sqrt(motion_noise(p.q, p.T, p.zeta, p.motion)[0, 0])

@@ -59,11 +59,12 @@ class MultiaspectPool:
         self.energy = energy_tables(templates, self.shape)
         self.k.set_templates(self.templates, self.energy)
 
-    def start(self, p_absent: float, prior: np.ndarray, motion, f0: np.ndarray) -> None:
-        """Every particle drawn from the ``prior`` LAW (z = 0 with probability ``p_absent``); the motion noise
-        factor (a, b, c) and f₀'s LAW for the steps."""
-        self.k.configure(np.asarray(motion, np.float32), np.asarray(f0, np.float32))
-        self.k.init_prior(self.seed, float(p_absent), np.asarray(prior, np.float32))
+    def start(self, p_absent: float, law: np.ndarray, motion) -> None:
+        """Every particle drawn from ``law`` (z = 0 with probability ``p_absent``), which is also f₀ for the steps;
+        the motion noise factor (a, b, c)."""
+        law = np.asarray(law, np.float32)
+        self.k.configure(np.asarray(motion, np.float32), law)
+        self.k.init_prior(self.seed, float(p_absent), law)
         self.side = 0  # the side of the kernels' prev holding the particles at n − 1
 
     def set_frames(self, y: np.ndarray, gmrf: np.ndarray) -> None:

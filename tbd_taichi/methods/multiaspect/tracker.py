@@ -51,7 +51,7 @@ class MultiaspectTracker(OneSequence):
         self.n_particles = particles(filter, self.p)
         self.pool = MultiaspectPool(self.shape, self.r.templates.shape, self.r.G, 1, self.n_particles, seed, engine,
                                     arch)
-        self.pool.start(self.r.p_absent, self.r.prior_law, self.r.motion, self.r.f0_law)
+        self.pool.start(self.r.p_absent, self.r.prior_law, self.r.motion)
         self.local_mean = LocalPlane(self.shape, self.r.mean_window)
         self.birth_support = entry_cells(self.shape, self.r.templates.shape, self.p.entry)
         self.peaks = np.zeros(len(self.r.templates))
