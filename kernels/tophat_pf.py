@@ -1,0 +1,247 @@
+"""Top-hat + particle filter kernels (Güler 2016, §3.4): the online background of Algs. 8–9 and one launch that
+steps every candidate's SIR filter.
+
+The pool holds G groups (the candidates) of N particles; slot p belongs to group p // N.  A group lives until
+Alg. 5 drops it (``alive``); a dead group's slots are skipped.  Positions are px (x = column, y = row, 0-based).
+
+* :meth:`TophatPFKernels.background`: Total ← Total + I_k, B̂_k = Total / (k + 1), S_k = I_k − B̂_k (Algs. 8–9 with
+  0-based frames: Total holds frames 0..k) and σ_k = std(S_k) over the frame (Eq. 3.14's σ_k);
+* :meth:`TophatPFKernels.start`: each group's reference z and N particles at its candidate + σ₀·n;
+* :meth:`TophatPFKernels.step`: per particle x_k = x_{k−1} + B + C·n, n ~ N(0, I₂) (Eq. 3.2 with A = I₂) and
+  log w = (z·S_k(x) − z²/2)/σ_k² (Eq. 3.14 over the noise density at the particle's pixel: the other pixels
+  cancel) − ‖B − (x_k − x̂_{k−1})‖²/(2σ_v²) (Eq. 3.16 with Δv = B, while ``motion``); off-image particles weigh 0;
+  per group the maximum, the cumulative weights c_i = Σ_{l≤i} w_l in f64 (Alg. 2 without the c₁ = 0 typo), N̂_eff
+  (Eq. 2.15), systematic resampling (Alg. 2: u_j = (u₁ + j)/N), the estimate = mean of the resampled particles,
+  S_k and S_k/σ_k at its pixel, and the drift B = (x̂_k − x̂_{k−m})/m with m = min(S, k − k₀) (Alg. 6: the mean
+  of the last m displacements, a sliding window), while ``drift``.
+
+Sums within a group run serially in one thread (groups in parallel), so the results do not depend on the thread
+count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
+``tbd_taichi.numpy_kernels.tophat_pf``."""
+import numpy as np
+import taichi as ti
+
+from .loops import thread_span
+from .particles.layout import first_above
+from .rng import NormalTables, key_prefix, normal_at, uniform_f64_at
+
+S_X, S_Y, S_START_X, S_START_Y, S_RESAMPLE = 0, 1, 2, 3, 4  # random streams
+SUMMARY = ("x", "y", "s", "snr", "bx", "by", "neff", "loglik")  # per-group columns of ``summary``
+SUM_X, SUM_Y, SUM_S, SUM_SNR, SUM_BX, SUM_BY, SUM_NEFF, SUM_LOGLIK = range(len(SUMMARY))
+CONFIG = ("c", "sigma_v", "s_drift", "sigma_0")  # ``configure``'s values
+NEG_INF = -3.0e38
+
+
+@ti.data_oriented
+class TophatPFKernels:
+    """Fields for ``groups`` filters of ``n`` particles on frames of ``shape``, the drift's ring of ``ring``
+    estimates (S + 1) and a frame sum of ``sum_dtype``."""
+
+    def __init__(self, groups: int, n: int, shape, ring: int):
+        self.groups, self.n, self.shape, self.ring = int(groups), int(n), (int(shape[0]), int(shape[1])), int(ring)
+        h, w = self.shape
+        slots = self.groups * self.n
+        self.total = ti.field(ti.f64, (h, w))  # Σ I (Algs. 8–9)
+        self.s = ti.field(ti.f32, (h, w))  # S_k = I_k − B̂_k (counts)
+        self.row_sums = ti.field(ti.f64, (h, 2))  # Σ S, Σ S² per row
+        self.stats = ti.field(ti.f64, 2)  # σ_k, mean of S_k
+        self.x, self.y = ti.field(ti.f32, slots), ti.field(ti.f32, slots)  # resampled particles
+        self.xp, self.yp = ti.field(ti.f32, slots), ti.field(ti.f32, slots)  # propagated particles
+        self.logw = ti.field(ti.f32, slots)
+        self.cum = ti.field(ti.f64, slots)
+        self.alive = ti.field(ti.i32, self.groups)
+        self.ref = ti.field(ti.f32, self.groups)  # z (counts)
+        self.gmax, self.gtotal, self.u1 = (ti.field(ti.f64, self.groups) for _ in range(3))
+        self.ring_xy = ti.field(ti.f32, (self.groups, self.ring, 2))  # the last ``ring`` estimates
+        self.drift = ti.field(ti.f32, (self.groups, 2))  # B (px/frame)
+        self.summary = ti.field(ti.f32, (self.groups, len(SUMMARY)))
+        self.config = ti.field(ti.f32, len(CONFIG))
+        self.seed = ti.field(ti.u32, ())
+        self.tables = NormalTables()
+
+    @ti.kernel
+    def configure(self, seed: ti.u32, values: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        """The seed and CONFIG's values (C, σ_v, S, σ₀); Total ← 0."""
+        self.seed[None] = seed
+        for i in ti.static(range(len(CONFIG))):
+            self.config[i] = values[i]
+        for r, c in self.total:
+            self.total[r, c] = 0.0
+
+    # ------------------------------------------------------------------ Algs. 8–9: the background
+
+    @ti.kernel
+    def background(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
+        """Total ← Total + I; S = I − Total/count (``count`` = frames in Total); stats = (σ, mean) of S."""
+        h, w = ti.static(self.shape)
+        for r, c in ti.ndrange(h, w):
+            t = self.total[r, c] + ti.cast(frame[r, c], ti.f64)
+            self.total[r, c] = t
+            self.s[r, c] = ti.cast(ti.cast(frame[r, c], ti.f64) - t / ti.cast(count, ti.f64), ti.f32)
+        for r in range(h):
+            a, b = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+            for c in range(w):
+                v = ti.cast(self.s[r, c], ti.f64)
+                a += v
+                b += v * v
+            self.row_sums[r, 0] = a
+            self.row_sums[r, 1] = b
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            a, b = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+            for r in range(h):
+                a += self.row_sums[r, 0]
+                b += self.row_sums[r, 1]
+            mean = a / (h * w)
+            self.stats[0] = ti.sqrt(ti.max(b / (h * w) - mean * mean, 0.0))
+            self.stats[1] = mean
+
+    # ------------------------------------------------------------------ the particles
+
+    @ti.kernel
+    def start(self, init: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
+        """Groups g < ``count`` alive with init[g] = (x, y, z): z the reference, N particles at (x, y) + σ₀·n
+        (streams S_START_X, S_START_Y, frame 0); the ring, the drift and the summary start at (x, y)."""
+        n, groups = ti.static(self.n, self.groups)
+        w, k, phi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
+        kx, ky = key_prefix(self.seed[None], 0, S_START_X), key_prefix(self.seed[None], 0, S_START_Y)
+        sigma_0 = self.config[3]
+        for g in range(groups):
+            self.alive[g] = ti.cast(g < count, ti.i32)
+            if g < count:
+                self.ref[g] = init[g, 2]
+                self.drift[g, 0] = 0.0
+                self.drift[g, 1] = 0.0
+                for j in ti.static(range(len(SUMMARY))):
+                    self.summary[g, j] = 0.0
+                self.summary[g, SUM_X] = init[g, 0]
+                self.summary[g, SUM_Y] = init[g, 1]
+                for m in range(self.ring):
+                    self.ring_xy[g, m, 0] = init[g, 0]
+                    self.ring_xy[g, m, 1] = init[g, 1]
+        for p in range(groups * n):
+            g = p // n
+            if g < count:
+                self.x[p] = init[g, 0] + sigma_0 * normal_at(w, k, phi, kx, p)
+                self.y[p] = init[g, 1] + sigma_0 * normal_at(w, k, phi, ky, p)
+
+    @ti.kernel
+    def set_alive(self, alive: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """alive ← ``alive`` (Alg. 5's survivors)."""
+        for g in range(self.groups):
+            self.alive[g] = alive[g]
+
+    @ti.kernel
+    def step(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
+        """One SIR step of every live group on the current S_k (see the module's docstring); ``since``: frames
+        since the filters started (the drift averages over min(S, since) displacements)."""
+        self.propagate_and_weigh(frame, motion)
+        self.normalise(frame)
+        self.resample()
+        self.estimate(since, drift)
+
+    @ti.func
+    def propagate_and_weigh(self, frame: ti.i32, motion: ti.i32):
+        """x_k = x_{k−1} + B + C·n (Eq. 3.2) and the log-weights of Eqs. 3.14 and 3.16."""
+        n, h, w = ti.static(self.n, self.shape[0], self.shape[1])
+        tw, tk, tphi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
+        kx, ky = key_prefix(self.seed[None], frame, S_X), key_prefix(self.seed[None], frame, S_Y)
+        c, sigma_v = self.config[0], self.config[1]
+        sigma = ti.cast(self.stats[0], ti.f32)
+        inv_var = 1.0 / ti.max(sigma * sigma, 1e-30)
+        inv_2sv2 = 1.0 / (2.0 * sigma_v * sigma_v)
+        for p in range(self.groups * n):
+            g = p // n
+            if self.alive[g] == 1:
+                bx, by = self.drift[g, 0], self.drift[g, 1]
+                x = self.x[p] + bx + c * normal_at(tw, tk, tphi, kx, p)
+                y = self.y[p] + by + c * normal_at(tw, tk, tphi, ky, p)
+                self.xp[p] = x
+                self.yp[p] = y
+                col = ti.cast(ti.floor(x + 0.5), ti.i32)
+                row = ti.cast(ti.floor(y + 0.5), ti.i32)
+                lw = ti.f32(NEG_INF)
+                if 0 <= col < w and 0 <= row < h:
+                    z = self.ref[g]
+                    lw = (z * self.s[row, col] - 0.5 * z * z) * inv_var  # Eq. 3.14 over the noise density
+                    if motion != 0:  # Eq. 3.16, Δv = B, v = x_k − x̂_{k−1}
+                        dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
+                        dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
+                        lw -= (dx * dx + dy * dy) * inv_2sv2
+                self.logw[p] = lw
+
+    @ti.func
+    def normalise(self, frame: ti.i32):
+        """Per group (serially): the maximum, c_i = Σ_{l≤i} exp(lw_l − max) (f64), the total, N̂_eff = (Σw)²/Σw²
+        (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
+        n = ti.static(self.n)
+        span = ti.static(thread_span(False))
+        key = key_prefix(self.seed[None], frame, S_RESAMPLE)
+        for t in range(self.groups * span):
+            g = t // span
+            if t % span == 0 and self.alive[g] == 1:
+                m = ti.f32(NEG_INF)
+                for i in range(g * n, (g + 1) * n):
+                    m = ti.max(m, self.logw[i])
+                s, s2 = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+                for i in range(g * n, (g + 1) * n):
+                    wi = ti.cast(0.0, ti.f64)
+                    if m > NEG_INF:
+                        wi = ti.exp(ti.cast(self.logw[i] - m, ti.f64))
+                    else:  # every particle off the image: keep them all alike
+                        wi = 1.0
+                    s += wi
+                    s2 += wi * wi
+                    self.cum[i] = s
+                self.gmax[g] = m
+                self.gtotal[g] = s
+                self.u1[g] = uniform_f64_at(key, g)
+                self.summary[g, SUM_NEFF] = ti.cast(s * s / s2, ti.f32)
+                self.summary[g, SUM_LOGLIK] = ti.cast(ti.log(s / n), ti.f32) + ti.max(m, ti.f32(-1e30))
+
+    @ti.func
+    def resample(self):
+        """Alg. 2: output j of group g copies the first particle whose c_i exceeds (u₁ + j)/N·Σw."""
+        n = ti.static(self.n)
+        for p in range(self.groups * n):
+            g = p // n
+            if self.alive[g] == 1:
+                j = p - g * n
+                v = (self.u1[g] + ti.cast(j, ti.f64)) / n * self.gtotal[g]
+                parent = first_above(self.cum, g * n, (g + 1) * n - 1, v)
+                self.x[p] = self.xp[parent]
+                self.y[p] = self.yp[parent]
+
+    @ti.func
+    def estimate(self, since: ti.i32, drift: ti.i32):
+        """Per group (serially): x̂ = mean of the resampled particles, S_k and S_k/σ_k at its pixel, and the drift
+        B = (x̂_k − x̂_{k−m})/m, m = min(S, since) (Alg. 6), while ``drift``."""
+        n, h, w, ring = ti.static(self.n, self.shape[0], self.shape[1], self.ring)
+        span = ti.static(thread_span(False))
+        sigma = ti.cast(self.stats[0], ti.f32)
+        s_drift = ti.cast(self.config[2], ti.i32)
+        for t in range(self.groups * span):
+            g = t // span
+            if t % span == 0 and self.alive[g] == 1:
+                sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+                for i in range(g * n, (g + 1) * n):
+                    sx += self.x[i]
+                    sy += self.y[i]
+                ex, ey = ti.cast(sx / n, ti.f32), ti.cast(sy / n, ti.f32)
+                col = ti.min(ti.max(ti.cast(ti.floor(ex + 0.5), ti.i32), 0), w - 1)
+                row = ti.min(ti.max(ti.cast(ti.floor(ey + 0.5), ti.i32), 0), h - 1)
+                self.summary[g, SUM_X] = ex
+                self.summary[g, SUM_Y] = ey
+                self.summary[g, SUM_S] = self.s[row, col]
+                self.summary[g, SUM_SNR] = self.s[row, col] / ti.max(sigma, 1e-30)
+                slot = since % ring
+                self.ring_xy[g, slot, 0] = ex
+                self.ring_xy[g, slot, 1] = ey
+                if drift != 0:
+                    m = ti.min(s_drift, since)
+                    if m > 0:
+                        old = (since - m) % ring
+                        self.drift[g, 0] = (ex - self.ring_xy[g, old, 0]) / m
+                        self.drift[g, 1] = (ey - self.ring_xy[g, old, 1]) / m
+                self.summary[g, SUM_BX] = self.drift[g, 0]
+                self.summary[g, SUM_BY] = self.drift[g, 1]
