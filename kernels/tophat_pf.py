@@ -50,6 +50,8 @@ class TophatPFKernels:
         self.logw = ti.field(ti.f32, slots)
         self.cum = ti.field(ti.f64, slots)
         self.alive = ti.field(ti.i32, self.groups)
+        self.live = ti.field(ti.i32, self.groups)  # the live groups, in order; n_live of them
+        self.n_live = ti.field(ti.i32, ())
         self.ref = ti.field(ti.f32, self.groups)  # z (counts)
         self.gmax, self.gtotal, self.u1 = (ti.field(ti.f64, self.groups) for _ in range(3))
         self.ring_xy = ti.field(ti.f32, (self.groups, self.ring, 2))  # the last ``ring`` estimates
@@ -119,7 +121,8 @@ class TophatPFKernels:
                 for m in range(self.ring):
                     self.ring_xy[g, m, 0] = init[g, 0]
                     self.ring_xy[g, m, 1] = init[g, 1]
-        for p in range(groups * n):
+        self.list_live()
+        for p in range(count * n):
             g = p // n
             if g < count:
                 self.x[p] = init[g, 0] + sigma_0 * normal_at(w, k, phi, kx, p)
@@ -130,6 +133,20 @@ class TophatPFKernels:
         """alive ← ``alive`` (Alg. 5's survivors)."""
         for g in range(self.groups):
             self.alive[g] = alive[g]
+        self.list_live()
+
+    @ti.func
+    def list_live(self):
+        """live[0..n_live) ← the alive groups in order (one serial pass: the slot loops then run over live groups'
+        slots only)."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            m = 0
+            for g in range(self.groups):
+                if self.alive[g] == 1:
+                    self.live[m] = g
+                    m += 1
+            self.n_live[None] = m
 
     @ti.kernel
     def step(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
@@ -150,8 +167,9 @@ class TophatPFKernels:
         sigma = ti.cast(self.stats[0], ti.f32)
         inv_var = 1.0 / ti.max(sigma * sigma, 1e-30)
         inv_2sv2 = 1.0 / (2.0 * sigma_v * sigma_v)
-        for p in range(self.groups * n):
-            g = p // n
+        for q in range(self.n_live[None] * n):
+            g = self.live[q // n]
+            p = g * n + q % n
             if self.alive[g] == 1:
                 bx, by = self.drift[g, 0], self.drift[g, 1]
                 x = self.x[p] + bx + c * normal_at(tw, tk, tphi, kx, p)
@@ -177,9 +195,9 @@ class TophatPFKernels:
         n = ti.static(self.n)
         span = ti.static(thread_span(False))
         key = key_prefix(self.seed[None], frame, S_RESAMPLE)
-        for t in range(self.groups * span):
-            g = t // span
-            if t % span == 0 and self.alive[g] == 1:
+        for t in range(self.n_live[None] * span):
+            g = self.live[t // span]
+            if t % span == 0:
                 m = ti.f32(NEG_INF)
                 for i in range(g * n, (g + 1) * n):
                     m = ti.max(m, self.logw[i])
@@ -203,8 +221,9 @@ class TophatPFKernels:
     def resample(self):
         """Alg. 2: output j of group g copies the first particle whose c_i exceeds (u₁ + j)/N·Σw."""
         n = ti.static(self.n)
-        for p in range(self.groups * n):
-            g = p // n
+        for q in range(self.n_live[None] * n):
+            g = self.live[q // n]
+            p = g * n + q % n
             if self.alive[g] == 1:
                 j = p - g * n
                 v = (self.u1[g] + ti.cast(j, ti.f64)) / n * self.gtotal[g]
@@ -220,9 +239,9 @@ class TophatPFKernels:
         span = ti.static(thread_span(False))
         sigma = ti.cast(self.stats[0], ti.f32)
         s_drift = ti.cast(self.config[2], ti.i32)
-        for t in range(self.groups * span):
-            g = t // span
-            if t % span == 0 and self.alive[g] == 1:
+        for t in range(self.n_live[None] * span):
+            g = self.live[t // span]
+            if t % span == 0:
                 sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
                 for i in range(g * n, (g + 1) * n):
                     sx += self.x[i]

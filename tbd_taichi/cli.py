@@ -40,15 +40,17 @@ def _truth_csv_path(out: Path) -> Path:
 def check_simulate(args) -> None:
     """The scenario's arguments (jia2022: --shape with sides ≥ 8, --frames, --snr, --motion stay|transit; long2012:
     --case, --snr-db; bruno2008: --ptcr, --exit-reentry, --frames; huo2022: --sequence, --frames; guler2016:
-    --wall, --motion 1|2, --delta, --frames 4-5000), the memory the frames need, and the two output files."""
+    --wall, --motion 1|2, --delta, --frames 4-5000, --wall-seed), the memory the frames need, and the two output
+    files."""
     from .simulate import check_memory
 
     own = {"jia2022": ("--shape", "--frames", "--snr", "--motion"), "long2012": ("--case", "--snr-db"),
            "bruno2008": ("--ptcr", "--exit-reentry", "--frames"), "huo2022": ("--sequence", "--frames"),
-           "guler2016": ("--wall", "--motion", "--delta", "--frames")}
+           "guler2016": ("--wall", "--motion", "--delta", "--frames", "--wall-seed")}
     given = {"--shape": args.shape, "--frames": args.frames, "--snr": args.snr, "--case": args.case,
              "--snr-db": args.snr_db, "--ptcr": args.ptcr, "--exit-reentry": args.exit_reentry or None,
-             "--sequence": args.sequence, "--motion": args.motion, "--wall": args.wall, "--delta": args.delta}
+             "--sequence": args.sequence, "--motion": args.motion, "--wall": args.wall, "--delta": args.delta,
+             "--wall-seed": args.wall_seed}
     for flag, value in given.items():
         if value is not None and flag not in own[args.scenario]:
             owners = " or ".join(s for s, flags in own.items() if flag in flags)
@@ -116,9 +118,11 @@ def cmd_simulate(args) -> int:
         from .guler2016 import DELTA, simulate_guler2016
 
         scene = simulate_guler2016(args.wall or "S1", int(args.motion or 1),
-                                   DELTA if args.delta is None else args.delta, seed=args.seed, frames=args.frames)
+                                   DELTA if args.delta is None else args.delta, seed=args.seed, frames=args.frames,
+                                   wall_seed=args.wall_seed)
         p = scene.params
-        what = (f"Güler 2016 wall {p['wall']}, Motion {p['motion']}, Δ {p['delta']:g} over the frame mean, uint16; "
+        what = (f"Güler 2016 wall {p['wall']} (wall seed {p['wall_seed']}), Motion {p['motion']}, "
+                f"Δ {p['delta']:g} over the frame mean, uint16; "
                 f"σ {p['sigma']:.2f}, SNR Δ/σ {p['snr']:.2f}, the thesis's Δ/(100σ) {p['snr_thesis']:.4f}")
     else:
         scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
@@ -304,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "Bruno et al. 2008 section 4, Huo et al. 2022 Table 1 or Güler 2016 section 3.1)",
                          description="Simulate dim targets in white Gaussian noise: SGDS-PF Eqs. 1, 14, 44-46 (--scenario jia2022) or Long et al. 2012 §5 with Eq. 4 and jitter (--scenario long2012 --case); "
                                      "or a multiaspect extended target in GMRF clutter on a smooth local mean, Bruno et al. 2008 Eqs. 1-9 and §4 (--scenario bruno2008 [--ptcr] [--exit-reentry]); "
-                                     "or a one-pixel target set to the frame mean + Δ on a synthetic 14-bit wall recording, Güler 2016 §3.1 (--scenario guler2016 [--wall] [--motion 1|2] [--delta]; uint16 frames). "
+                                     "or a one-pixel target set to the frame mean + Δ on a synthetic 14-bit wall recording, Güler 2016 §3.1 (--scenario guler2016 [--wall] [--motion 1|2] [--delta] [--wall-seed]; uint16 frames). "
                                      "Writes OUT (.npz with arrays 'frames' and 'truth'; bruno2008 adds 'local_mean') and OUT_truth.csv beside it "
                                      "(bruno2008 adds an integer 'aspect' column, 1-4).")
     sim.add_argument("--sequence", choices=("weak", "complex", "fast", "rotating"), default=None,
@@ -315,10 +319,14 @@ def build_parser() -> argparse.ArgumentParser:
                           "bruno2008: Bruno et al. 2008's §4 scene, 120x120 (--ptcr, --exit-reentry, --frames); "
                           "huo2022: box-truth sequences after Huo et al. 2022's Table 1 (--sequence, --frames); "
                           "guler2016: a one-pixel target on a 100x100 14-bit wall after Güler's 2016 thesis, "
-                          "134 frames at 100 Hz (--wall, --motion 1|2, --delta, --frames)")
+                          "134 frames at 100 Hz (--wall, --motion 1|2, --delta, --frames, --wall-seed)")
     sim.add_argument("--wall", choices=("S1", "S2"), default=None,
                      help="guler2016: the wall, S1 structured (mean 7195, σ ≈ 9.2 counts; default) or S2 smooth "
                           "(mean 8602, σ ≈ 4.3)")
+    sim.add_argument("--wall-seed", type=number(whole, 0), default=None, metavar="N",
+                     help="guler2016: draw the wall's static part (row profile and texture) from seed N, a whole "
+                          "number ≥ 0 (default: the wall's one recording, seed 9 for S1 and 0 for S2, as the thesis "
+                          "had one recording per sensor); --seed draws the drift and the noise")
     sim.add_argument("--delta", type=number(positive), default=None, metavar="D",
                      help="guler2016: the target pixel is set to the frame mean + D counts, D > 0 (default 30; the "
                           "thesis runs 100, 60, 50, 30, 20, 15, 14, 13, 10)")
@@ -340,7 +348,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--snr", type=number(positive), default=None,
                      help="jia2022: target SNR of Eq. 1: centre-pixel signal / noise std")
     sim.add_argument("--targets", type=number(whole, 1), default=1, help="number of targets (≥ 1, default 1)")
-    sim.add_argument("--seed", type=number(whole, 0), default=0, help="random seed, a whole number ≥ 0 (default 0)")
+    sim.add_argument("--seed", type=number(whole, 0), default=0,
+                     help="random seed, a whole number ≥ 0 (default 0); guler2016: the drift and the noise only "
+                          "(the wall is --wall-seed's)")
     sim.add_argument("--motion", choices=("stay", "transit", "1", "2"), default=None,
                      help="jia2022: stay, targets stay in view (default), or transit, they enter and leave; "
                           "guler2016: 1, from (x 0, y 69) rightwards (default), or 2, from (x 0, y 39) down-right at "

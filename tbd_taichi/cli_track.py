@@ -57,8 +57,14 @@ def add_track_parser(sub, common) -> None:
                     help="pf only: existence probability in (0, 1) above which a target is declared (default 0.5)")
     tr.add_argument("--out", default=None, help="output tracks CSV (required; its folder must exist)")
     tr.add_argument("--paths", choices=("whole", "online"), default=None,
-                    help="sgds: whole = each confirmed track's whole path, from before its confirmation (default); "
-                         "online = the rows as output online, from confirmation on")
+                    help="sgds, tophat-pf: whole = each confirmed track's whole path, from before its confirmation "
+                         "(default); online = the rows as output online, from confirmation on")
+    tr.add_argument("--report", type=int, choices=(1, 2), default=None,
+                    help="tophat-pf: tracks reported: 1 (default: the confirmed survivor) or 2 (and the next-strongest "
+                         "survivor)")
+    tr.add_argument("--diagnostics", default=None, metavar="CSV",
+                    help="tophat-pf: write each window's candidates, trajectory costs J, evidence and decisions (Alg. 5) "
+                         "to this CSV")
     tr.add_argument("--truth", default=None,
                     help="truth CSV, points (frame,target_id,x,y,...: DSR, EDT, false tracks, OSPA) or boxes "
                          "(frame,x,y,w,h[,target_id]: detection rate, false points per frame, centre error, IoU)")
@@ -126,14 +132,22 @@ def flag_settings(args, spec) -> dict:
     chosen = {**flagged, **given}
     if args.background is not None:
         chosen["background"] = args.background
-    switches = {"--paths online": args.paths == "online", "--frontend-process": args.frontend_process,
+    for option, value in (("report", args.report), ("diagnostics", args.diagnostics)):
+        if value is not None:
+            if option not in declared:
+                raise TBDError(f"--{option} applies to --method tophat-pf only")
+            chosen[option] = value
+    if "paths" in declared and args.paths is not None:
+        chosen["paths"] = args.paths
+    switches = {"--paths online": args.paths == "online" and "paths" not in declared,
+                "--frontend-process": args.frontend_process,
                 "--paper-saliency": args.paper_saliency}
     needs = {"--paths online": {"history"}, "--frontend-process": {"frontend_process"},
              "--paper-saliency": set(PAPER_SALIENCY)}
     for flag, on in switches.items():
         if on and not needs[flag] <= declared:
-            raise TBDError(f"{flag} applies to --method sgds only")
-    if args.paths == "online":
+            raise TBDError(f"{flag} applies to --method sgds{' or tophat-pf' if flag == '--paths online' else ''} only")
+    if args.paths == "online" and "history" in declared:
         chosen["history"] = False  # rows go to the CSV as they come: constant memory
     if args.frontend_process:
         chosen["frontend_process"] = True
@@ -192,7 +206,9 @@ def plan_track(args) -> TrackPlan | None:
     init_box = parse_init_box(args.init_box)
     out = validate.output_path("--out", args.out)
     outputs = {"video": validate.output_path("--video", args.video, validate.VIDEO_OUT) if args.video else None,
-               "plot": validate.output_path("--plot", args.plot, validate.PLOT_OUT) if args.plot else None}
+               "plot": validate.output_path("--plot", args.plot, validate.PLOT_OUT) if args.plot else None,
+               "diagnostics": validate.output_path("--diagnostics", args.diagnostics, (".csv",))
+               if args.diagnostics else None}
     for name, path in outputs.items():
         if path is not None and path.resolve() == out.resolve():
             raise TBDError(f"--{name} {path} is the --out file too; give two paths")

@@ -44,7 +44,7 @@ class TophatPFTracker(OneSequence):
     intensity = S_k at the estimate, confidence = 1 − J/2 of the last window)."""
 
     def __init__(self, shape, seed: int = 0, engine: str = "taichi", arch: str | None = None, report: int = 1,
-                 paths: str = "online", diagnostics=None, **params):
+                 paths: str = "whole", diagnostics=None, **params):
         self.shape = (int(shape[0]), int(shape[1]))
         self.p = tophat_pf_params(self.shape, **params)
         self.report, self.paths = report, paths
