@@ -22,7 +22,6 @@ import numpy as np
 import taichi as ti
 
 from .loops import thread_span
-from .particles.layout import first_above
 from .rng import NormalTables, key_prefix, normal_at, uniform_f64_at
 
 S_X, S_Y, S_START_X, S_START_Y, S_RESAMPLE = 0, 1, 2, 3, 4  # random streams
@@ -154,7 +153,6 @@ class TophatPFKernels:
         since the filters started (the drift averages over min(S, since) displacements)."""
         self.propagate_and_weigh(frame, motion)
         self.normalise(frame)
-        self.resample()
         self.estimate(since, drift)
 
     @ti.func
@@ -218,22 +216,26 @@ class TophatPFKernels:
                 self.summary[g, SUM_LOGLIK] = ti.cast(ti.log(s / n), ti.f32) + ti.max(m, ti.f32(-1e30))
 
     @ti.func
-    def resample(self):
-        """Alg. 2: output j of group g copies the first particle whose c_i exceeds (u₁ + j)/N·Σw."""
+    def resample_group(self, g: ti.i32) -> ti.types.vector(2, ti.f64):
+        """Alg. 2 for group g: output j copies the first particle whose c_i exceeds (u₁ + j)/N·Σw, found by one
+        forward walk (the points rise with j); returns the sums of the copies' x and y."""
         n = ti.static(self.n)
-        for q in range(self.n_live[None] * n):
-            g = self.live[q // n]
-            p = g * n + q % n
-            if self.alive[g] == 1:
-                j = p - g * n
-                v = (self.u1[g] + ti.cast(j, ti.f64)) / n * self.gtotal[g]
-                parent = first_above(self.cum, g * n, (g + 1) * n - 1, v)
-                self.x[p] = self.xp[parent]
-                self.y[p] = self.yp[parent]
+        i, last = g * n, (g + 1) * n - 1
+        sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+        for j in range(n):
+            v = (self.u1[g] + ti.cast(j, ti.f64)) / n * self.gtotal[g]
+            while i < last and self.cum[i] <= v:
+                i += 1
+            x, y = self.xp[i], self.yp[i]
+            self.x[g * n + j] = x
+            self.y[g * n + j] = y
+            sx += x
+            sy += y
+        return ti.Vector([sx, sy])
 
     @ti.func
     def estimate(self, since: ti.i32, drift: ti.i32):
-        """Per group (serially): x̂ = mean of the resampled particles, S_k and S_k/σ_k at its pixel, and the drift
+        """Per group (serially): systematic resampling (``resample_group``), x̂ = mean of the resampled particles, S_k and S_k/σ_k at its pixel, and the drift
         B = (x̂_k − x̂_{k−m})/m, m = min(S, since) (Alg. 6), while ``drift``."""
         n, h, w, ring = ti.static(self.n, self.shape[0], self.shape[1], self.ring)
         span = ti.static(thread_span(False))
@@ -242,11 +244,8 @@ class TophatPFKernels:
         for t in range(self.n_live[None] * span):
             g = self.live[t // span]
             if t % span == 0:
-                sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
-                for i in range(g * n, (g + 1) * n):
-                    sx += self.x[i]
-                    sy += self.y[i]
-                ex, ey = ti.cast(sx / n, ti.f32), ti.cast(sy / n, ti.f32)
+                sums = self.resample_group(g)
+                ex, ey = ti.cast(sums[0] / n, ti.f32), ti.cast(sums[1] / n, ti.f32)
                 col = ti.min(ti.max(ti.cast(ti.floor(ex + 0.5), ti.i32), 0), w - 1)
                 row = ti.min(ti.max(ti.cast(ti.floor(ey + 0.5), ti.i32), 0), h - 1)
                 self.summary[g, SUM_X] = ex
