@@ -29,7 +29,7 @@ class TophatPFParams:
                      unit="px", source="Eq. 3.2, §4", low=0, low_closed=False, high=100)
     sigma_v: float = param(0.5, doc="motion likelihood width (Eq. 3.16)", symbol="σ_v", unit="px",
                            source="Eq. 3.16 (not in the thesis)", low=0, low_closed=False, high=100)
-    s_drift: int = param(50, doc="the drift B is the mean of the estimate's last S displacements",
+    s_drift: int = param(80, doc="the drift B is the mean of the estimate's last S displacements",
                          symbol="S", unit="frames", source="Alg. 6, Table 4.10", low=1, high=1000, integer=True)
     sigma_0: float = param(1.0, doc="initial spread of the particles around the candidate", symbol="σ₀",
                            unit="px", source="not in the thesis", low=0, high=100)
