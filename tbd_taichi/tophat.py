@@ -83,12 +83,14 @@ def candidates(ic, thr: float, max_candidates: int) -> np.ndarray:
     return np.column_stack([cols[order], rows[order], scores[order]]).astype(np.float64)
 
 
-def tophat_frames(frames, se_size: int, se_shape: str, engine: str = "taichi") -> np.ndarray:
-    """(m, H, W) float32 top-hats D_k of the frames (Eqs. 3.4–3.10) on ``engine``."""
+def tophat_frames(frames, se_size: int, se_shape: str, engine: str = "taichi", kernels=None) -> np.ndarray:
+    """(m, H, W) float32 top-hats D_k of the frames (Eqs. 3.4–3.10) on ``engine`` (with ``kernels``, a
+    ``TophatKernels`` of that frame shape and element, when the caller keeps one)."""
     frames = _check_frames(frames, "frames")
     shape = frames.shape[1:]
     check_structuring_element(se_size, se_shape, shape)
-    kernels = kernel_module(engine, "tophat").TophatKernels(shape, se_size, se_shape)
+    if kernels is None:
+        kernels = kernel_module(engine, "tophat").TophatKernels(shape, se_size, se_shape)
     out = np.zeros(frames.shape, np.float32)
     for k, frame in enumerate(frames):
         kernels.tophat(np.ascontiguousarray(frame, np.float32), out[k])  # out[k]: a contiguous view
@@ -96,12 +98,13 @@ def tophat_frames(frames, se_size: int, se_shape: str, engine: str = "taichi") -
 
 
 def find_candidates(frames, alpha: float, se_size: int, se_shape: str, max_candidates: int,
-                    engine: str = "taichi") -> tuple[np.ndarray, np.ndarray, float]:
+                    engine: str = "taichi", kernels=None) -> tuple[np.ndarray, np.ndarray, float]:
     """The candidate stage on the 3 raw (3, H, W) frames: top-hats, I_c (Eq. 3.12), T (Eq. 3.13) and the
-    candidates; returns (candidates (K, 3) [x, y, score], I_c (H, W) float64, T)."""
+    candidates; returns (candidates (K, 3) [x, y, score], I_c (H, W) float64, T).  ``kernels``: see
+    :func:`tophat_frames`."""
     frames = _check_frames(frames, "frames")
     if frames.shape[0] != 3:
         raise InputError(f"frames must be the first 3 frames (m = 3, Eq. 3.12), got {frames.shape[0]}")
-    ic = projection(tophat_frames(frames, se_size, se_shape, engine))
+    ic = projection(tophat_frames(frames, se_size, se_shape, engine, kernels))
     thr = threshold(ic, alpha)
     return candidates(ic, thr, max_candidates), ic, thr

@@ -52,14 +52,8 @@ class TophatPFTracker(OneSequence):
         self.lengths = window_lengths(self.p.windows)
         self.seed, self.engine, self.arch = int(seed), engine, arch
         groups, ring = self.p.max_candidates, self.p.s_drift + 1
-        module = kernel_module(engine, "tophat_pf", arch)
-        dims = (groups, self.p.n_particles, self.shape, ring)
-        if engine == "numpy":
-            self.k = module.TophatPFKernels(*dims)
-        else:
-            from ...launch import Launcher
-
-            self.k = Launcher(backend.reusable(self, ("tophat_pf",) + dims, lambda: module.TophatPFKernels(*dims)))
+        self.k = self._kernels("tophat_pf", "TophatPFKernels", (groups, self.p.n_particles, self.shape, ring))
+        self.tophat = self._kernels("tophat", "TophatKernels", (self.shape, self.p.se_size, self.p.se_shape))
         self.k.configure(self.seed, np.array([self.p.c, self.p.sigma_v, self.p.s_drift, self.p.sigma_0], np.float32))
         self.first: list[np.ndarray] = []
         self.candidates = np.zeros((0, 3))
@@ -74,6 +68,16 @@ class TophatPFTracker(OneSequence):
         self.log: list[tuple] = []
         self.frame = 0
         self.seconds = {s: 0.0 for s in STAGES}
+
+    def _kernels(self, concept: str, name: str, dims: tuple):
+        """The engine's ``name`` kernels of ``concept`` for ``dims``; Taichi's reused from a finished tracker of the
+        same dims (no recompilation) and launched by the lean path."""
+        cls = getattr(kernel_module(self.engine, concept, self.arch), name)
+        if self.engine == "numpy":
+            return cls(*dims)
+        from ...launch import Launcher
+
+        return Launcher(backend.reusable(self, (concept,) + dims, lambda: cls(*dims)))
 
     @property
     def frames_in(self) -> int:
@@ -107,7 +111,7 @@ class TophatPFTracker(OneSequence):
         if len(self.first) < FIRST_FRAMES:
             return
         found, _, _ = find_candidates(np.stack(self.first), self.p.alpha, self.p.se_size, self.p.se_shape,
-                                      self.p.max_candidates, engine=self.engine)
+                                      self.p.max_candidates, engine=self.engine, kernels=self.tophat)
         self.first = []
         self.candidates = found
         if not len(found):
