@@ -9,7 +9,8 @@ Alg. 5 drops it (``alive``); a dead group's slots are skipped.  Positions are px
 * :meth:`TophatPFKernels.start`: each group's reference z and N particles at its candidate + σ₀·n;
 * :meth:`TophatPFKernels.step`: per particle x_k = x_{k−1} + B + C·n, n ~ N(0, I₂) (Eq. 3.2 with A = I₂) and
   log w = (z·S_k(x) − z²/2)/σ_k² (Eq. 3.14 over the noise density at the particle's pixel: the other pixels
-  cancel) − ‖B − (x_k − x̂_{k−1})‖²/(2σ_v²) (Eq. 3.16 with Δv = B, while ``motion``); off-image particles weigh 0;
+  cancel) − ‖B − (pixel(x_k) − x̂_{k−1})‖²/(2σ_v²) (Eq. 3.16 with Δv = B and v at the particle's pixel centre, while
+  ``motion``); off-image particles weigh 0;
   per group the maximum, the cumulative weights c_i = Σ_{l≤i} w_l in f64 (Alg. 2 without the c₁ = 0 typo), N̂_eff
   (Eq. 2.15), systematic resampling (Alg. 2: u_j = (u₁ + j)/N), the estimate = mean of the resampled particles,
   S_k and S_k/σ_k at its pixel, and the drift B = (x̂_k − x̂_{k−m})/m with m = min(S, k − k₀) (Alg. 6: the mean
@@ -180,7 +181,7 @@ class TophatPFKernels:
                 if 0 <= col < w and 0 <= row < h:
                     z = self.ref[g]
                     lw = (z * self.s[row, col] - 0.5 * z * z) * inv_var  # Eq. 3.14 over the noise density
-                    if motion != 0:  # Eq. 3.16, Δv = B, v = x_k − x̂_{k−1}
+                    if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
                         dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
                         dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
                         lw -= (dx * dx + dy * dy) * inv_2sv2

@@ -135,8 +135,10 @@ class TophatPFTracker(OneSequence):
         if self.frame == FIRST_FRAMES:
             self._start()
         since = self.frame - FIRST_FRAMES
-        learnt = self.p.drift and self.frame > window_of(self.lengths, 0, FIRST_FRAMES)[1]  # B after window 1
-        self.k.step(self.frame, since, int(learnt), int(learnt and self.p.weighting == "combined"))
+        end_1 = window_of(self.lengths, 0, FIRST_FRAMES)[1]
+        learnt = self.p.drift and self.frame >= end_1  # B from window 1's path, at its last frame
+        motion = learnt and self.frame > end_1 and self.p.weighting == "combined"  # Eq. 3.16 once B is there
+        self.k.step(self.frame, since, int(learnt), int(motion))
         self.summaries.append(backend.to_host(self.k.summary))
         t1 = time.perf_counter()
         self.seconds["particles"] += t1 - t0
@@ -161,10 +163,10 @@ class TophatPFTracker(OneSequence):
         self.cost = trajectory_cost(path.astype(np.float64), self.p.epsilon)
         evidence = self._evidence()
         before = self.alive.copy()
-        alive = merged(path, self.alive, self.cost, self.p.merge_distance, self.confirmed)
+        alive = merged(path, self.alive, self.cost, self.p.merge_distance, self.reported)
         merged_away = before & ~alive
         if alive.sum() > 2:
-            alive = eliminated(alive, self.cost, evidence, self.confirmed)
+            alive = eliminated(alive, self.cost, evidence, self.reported)
         out: list[tuple] = []
         if self.confirmed < 0 and (index >= 2 or alive.sum() <= 2):
             self.confirmed = strongest(alive, evidence, 1)[0]

@@ -15,29 +15,35 @@ def trajectory_cost(path: np.ndarray, epsilon: float) -> np.ndarray:
     return num / ((np.hypot(*dv2.T) + np.hypot(*dv1.T)) / 2.0 + epsilon)
 
 
-def merged(path: np.ndarray, alive: np.ndarray, cost: np.ndarray, distance: float, keep: int) -> np.ndarray:
+def kept_always(keep) -> set[int]:
+    """The filters that always stay: ``keep`` an index (−1: none) or a sequence of them (the reported ones)."""
+    return {int(k) for k in np.atleast_1d(keep) if k >= 0}
+
+
+def merged(path: np.ndarray, alive: np.ndarray, cost: np.ndarray, distance: float, keep) -> np.ndarray:
     """``alive`` without the duplicates: of filters whose estimates stay within ``distance`` px of each other through
-    the whole window ``path`` (L, G, 2), the one of lower cost stays (filter ``keep`` ≥ 0, the confirmed one,
-    always stays)."""
+    the whole window ``path`` (L, G, 2), the one of lower cost stays (the filters ``keep``, the confirmed and
+    reported ones, always stay)."""
     out = alive.copy()
     live = np.nonzero(alive)[0]
     if len(live) < 2:
         return out
+    always = kept_always(keep)
     p = path[:, live]
     close = (np.hypot(*(p[:, :, None] - p[:, None, :]).transpose(3, 0, 1, 2)) <= distance).all(axis=0)
-    order = sorted(range(len(live)), key=lambda i: (live[i] != keep, cost[live[i]], live[i]))
+    order = sorted(range(len(live)), key=lambda i: (live[i] not in always, cost[live[i]], live[i]))
     kept: list[int] = []
     for i in order:
-        if any(close[i, j] for j in kept):
+        if live[i] not in always and any(close[i, j] for j in kept):
             out[live[i]] = False
         else:
             kept.append(i)
     return out
 
 
-def eliminated(alive: np.ndarray, cost: np.ndarray, evidence: np.ndarray, keep: int) -> np.ndarray:
+def eliminated(alive: np.ndarray, cost: np.ndarray, evidence: np.ndarray, keep) -> np.ndarray:
     """Alg. 5's elimination: ``alive`` without the filters of J ≥ mean(J) over the live ones, always keeping the
-    lowest J, the strongest ``evidence`` and filter ``keep`` (≥ 0: the confirmed one)."""
+    lowest J, the strongest ``evidence`` and the filters ``keep`` (see :func:`kept_always`)."""
     live = np.nonzero(alive)[0]
     out = alive.copy()
     if len(live) == 0:
@@ -45,8 +51,8 @@ def eliminated(alive: np.ndarray, cost: np.ndarray, evidence: np.ndarray, keep: 
     out[live[cost[live] >= cost[live].mean()]] = False
     out[live[np.argmin(cost[live])]] = True
     out[live[np.argmax(evidence[live])]] = True
-    if keep >= 0:
-        out[keep] = True
+    for k in kept_always(keep):
+        out[k] = True
     return out
 
 
