@@ -19,7 +19,6 @@ Alg. 5 drops it (``alive``); a dead group's slots are skipped.  Positions are px
 Sums within a group run serially in one thread (groups in parallel), so the results do not depend on the thread
 count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
 ``tbd_taichi.numpy_kernels.tophat_pf``."""
-import numpy as np
 import taichi as ti
 
 from .loops import thread_span

@@ -217,12 +217,27 @@ def check_evaluate_suite(args) -> dict:
         raise TBDError(f"--scenario long2012 evaluates --methods mm-phd (and its ablations), got {args.methods!r}")
     if args.scenario == "bruno2008" and not set(chosen) <= {"ma-rs", "ma-apf"}:
         raise TBDError(f"--scenario bruno2008 evaluates --methods ma-rs,ma-apf (both run), got {args.methods!r}")
+    if args.scenario == "guler2016":
+        from .suite_guler2016 import METHODS as GULER_METHODS
+
+        if set(chosen) - set(GULER_METHODS):
+            raise TBDError(f"--scenario guler2016 evaluates --methods of {','.join(GULER_METHODS)}, got "
+                           f"{args.methods!r}")
+    elif args.compare_runs is not None:
+        raise TBDError("--compare-runs applies to --scenario guler2016")
     if args.scenario == "jia2022" and scenarios != {"jia2022"}:
         raise TBDError(f"--methods {args.methods} is evaluated on --scenario {scenarios.pop()}; give it")
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
     sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
-    tests = suite.QUICK["tests"] if args.quick and args.tests == 100 else args.tests
-    out_dir = Path(args.out_dir)
+    if args.tests is not None:
+        tests = args.tests
+    elif args.scenario == "guler2016":
+        from .suite_guler2016 import QUICK as GULER_QUICK, RUNS
+
+        tests = GULER_QUICK["runs"] if args.quick else RUNS
+    else:
+        tests = suite.QUICK["tests"] if args.quick else 100
+    out_dir = Path(args.out_dir or ("docs/results/guler2016" if args.scenario == "guler2016" else "suite-results"))
     if out_dir.exists() and not out_dir.is_dir():
         raise TBDError(f"--out-dir {out_dir}: is a file; give a folder")
     validate.output_path("--out-dir", out_dir / "suite_runs.jsonl") if out_dir.is_dir() else \
@@ -240,6 +255,8 @@ def cmd_evaluate_suite(args) -> int:
         return run_long2012_suite(args, plan["tests"], plan["out_dir"])
     if args.scenario == "bruno2008":
         return run_bruno2008_suite(args, plan["tests"], plan["out_dir"])
+    if args.scenario == "guler2016":
+        return run_guler2016_suite(args, plan["chosen"], plan["tests"], plan["out_dir"])
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
     runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
     out_dir.mkdir(exist_ok=True)
@@ -289,6 +306,34 @@ def run_bruno2008_suite(args, tests: int, out_dir: Path) -> int:
                f"--seed {args.seed} --out-dir {out_dir}")
     print(suite_bruno2008.tables_markdown(results, command))
     print(f"report -> {suite_bruno2008.write_report(results, out_dir, command)}")
+    return 0
+
+
+def run_guler2016_suite(args, chosen: tuple, runs: int, out_dir: Path) -> int:
+    """evaluate-suite --scenario guler2016: Güler's Tables 4.6–4.8 (all methods) and 4.9–4.11 (tophat-pf) beside
+    the thesis's values (suite_guler2016)."""
+    import time
+
+    from . import suite_guler2016
+    from .progress import frame_progress
+
+    out_dir.mkdir(exist_ok=True)
+    todo = suite_guler2016.plan(chosen, runs, args.compare_runs, args.seed, args.quick)
+    cells = len(suite_guler2016.cells(args.quick))
+    print(f"{len(todo)} runs ({','.join(chosen)} x {cells} wall/motion/Δ cell(s) x {runs} run(s)"
+          + (f", {args.compare_runs} for the others" if args.compare_runs is not None else "")
+          + ("; tophat-pf's N, S, C sweeps" if suite_guler2016.FLAGSHIP in chosen else "") + f") -> {out_dir}")
+    command = (f"tbd-taichi evaluate-suite --methods {','.join(chosen)} --scenario guler2016 --runs {runs} "
+               + (f"--compare-runs {args.compare_runs} " if args.compare_runs is not None else "")
+               + ("--quick " if args.quick else "") + f"--seed {args.seed} --out-dir {out_dir}")
+    started = time.perf_counter()
+    with frame_progress("runs", len(todo), "off" if args.no_progress else "auto") as progress:
+        results = suite_guler2016.execute(todo, out_dir, progress, meta=dict(command=command))
+    seconds = time.perf_counter() - started
+    report = suite_guler2016.write_report(results, out_dir, command, chosen, runs, args.compare_runs, seconds,
+                                          args.seed)
+    print("\n".join(suite_guler2016.overview_table(results)) if suite_guler2016.FLAGSHIP in chosen else "")
+    print(f"report -> {report} ({seconds:.0f} s)")
     return 0
 
 
@@ -360,9 +405,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.set_defaults(func=cmd_simulate, check=check_simulate)
 
     ev = sub.add_parser("evaluate", help="score a tracks CSV against a truth CSV",
-                        description="Point truth: mean EDT (Eq. 47), DSR (Eq. 48), false tracks, OSPA and Long et "
+                        description="Point truth: mean EDT (Eq. 47), DSR (Eq. 48), false tracks, OSPA, Long et "
                                     "al. 2012's track detection (5 px): mean |cardinality error| per frame, P_TD, "
-                                    "detection and halt frames (0-based). Box truth: detection rate, false points "
+                                    "detection and halt frames (0-based), and Güler 2016's MSE (Eq. 4.1b, px²) and "
+                                    "max error (px) of the track matched to each target (the one with the most rows "
+                                    "within 5 px of it), over the frames where both have a row. "
+                                    "Box truth: detection rate, false points "
                                     "per frame, centre error and IoU; for a box tracker's tracks (with w,h) also "
                                     "the OTB measures over the frames after the first labelled one (its init box): "
                                     "mean centre location error CLE, DP@20 and DP@5 (fraction of frames with CLE "
@@ -379,7 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sequence length for the OSPA and cardinality-error averages (default: last frame in "
                          "either file + 1)")
     ev.add_argument("--json", action="store_true", help="print one JSON object (point truth: keys dsr, edt_mean, "
-                    "false_tracks, ospa, cardinality_error, p_td, detection_frame, halt_frame; box truth: "
+                    "false_tracks, ospa, mse, max_error, cardinality_error, p_td, detection_frame, halt_frame; "
+                    "per target also mse, max_error, matched_track; box truth: "
                     "detection_rate, false_points, first_confirmation, centre_error, iou and, for tracks with w,h, "
                     "cle, dp20, dp5, dp_curve, mean_iou, success_curve, auc, scored_frames, missed_frames)")
     ev.add_argument("--box-margin", type=number(positive, 0.0, True), default=metrics.BOX_MARGIN,
@@ -399,12 +448,19 @@ def build_parser() -> argparse.ArgumentParser:
                                     "mean DSR, false tracks and ms/frame as a markdown table, JSON and PNG figures. "
                                     "Runs are appended to OUT_DIR/suite_runs.jsonl as they finish: Ctrl-C keeps them "
                                     "and a rerun skips them.")
-    es.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008"), default="jia2022",
+    es.add_argument("--scenario", choices=("jia2022", "long2012", "bruno2008", "guler2016"), default="jia2022",
                     help="jia2022: SGDS-PF's SNR x size suite (default); long2012: Long et al.'s §5 scenes for "
                          "--methods mm-phd (Tables 2-4, Figs. 2, 4, 5, 7); bruno2008: Bruno et al.'s §4 Monte "
-                         "Carlo and exit/re-entry runs for --methods ma-rs,ma-apf (Fig. 6)")
-    es.add_argument("--tests", type=number(whole, 1), default=100, help="sequences per condition (default 100)")
-    es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition")
+                         "Carlo and exit/re-entry runs for --methods ma-rs,ma-apf (Fig. 6); guler2016: Güler's "
+                         "2016 Tables 4.6-4.8 (max error, MSE per wall x motion x delta) for --methods of "
+                         "tophat-pf,sgds,pf and, with tophat-pf, its N, S, C sweeps (Tables 4.9-4.11), beside the "
+                         "thesis's values")
+    es.add_argument("--tests", "--runs", dest="tests", type=number(whole, 1), default=None, metavar="N",
+                    help="sequences per condition (default 100; guler2016: 20 runs per cell, the sweeps at most 10)")
+    es.add_argument("--compare-runs", type=number(whole, 1), default=None, metavar="N",
+                    help="guler2016: runs per cell for the methods other than tophat-pf (default: --runs)")
+    es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition; "
+                    "guler2016: S1 Motion 1 delta 30 and one value per sweep, 2 runs")
     es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
     es.add_argument("--size", choices=("all", "50", "200"), default="all",
                     help="50 (50x50, 70 frames), 200 (200x200, 150 frames) or all (default)")
@@ -414,7 +470,9 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--tracker-snr", type=number(positive), default=None,
                     help="give every tracker this snr preset (default: the condition's SNR, as in the paper)")
     es.add_argument("--workers", type=number(whole, 1), default=None, help="parallel processes (default: the core count)")
-    es.add_argument("--out-dir", default="suite-results", help="where the table, JSON, figures and runs go (made if its parent exists)")
+    es.add_argument("--out-dir", "--out", dest="out_dir", default=None,
+                    help="where the table, JSON, figures and runs go (made if its parent exists; default "
+                         "suite-results, guler2016: docs/results/guler2016)")
     es.add_argument("--no-progress", action="store_true", help="no progress bar")
     _common(es)
     es.set_defaults(func=cmd_evaluate_suite, check=check_evaluate_suite)

@@ -277,6 +277,10 @@ def _frame(value) -> str:
     return "-" if value is None else str(value)
 
 
+def _px(value: float) -> str:
+    return "n/a" if value != value else f"{value:.4f}"
+
+
 def format_scores(scores: dict) -> str:
     """The scores as the lines ``track`` and ``evaluate`` print."""
     if scores.get("truth") == "boxes":
@@ -293,6 +297,8 @@ def format_scores(scores: dict) -> str:
                       f"mean EDT (px)      {scores['edt_mean']:.3f}",
                       f"false tracks       {scores['false_tracks']}",
                       f"OSPA (c={scores['ospa_c']:g}, p={scores['ospa_p']:g})  {scores['ospa']:.3f}",
+                      f"MSE / max error    {_px(scores['mse'])} px² / {_px(scores['max_error'])} px "
+                      f"(Güler Eq. 4.1b, the track matched within {metrics.MATCH_GATE:g} px)",
                       f"|cardinality error| {scores['cardinality_error']:.3f} per frame",
                       f"P_TD (5 px)        {scores['p_td']:.3f}",
                       "detected / halted  " + ", ".join(f"{t}: {_frame(scores['detection_frame'][t])}/"

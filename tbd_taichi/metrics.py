@@ -12,6 +12,8 @@ Inputs are the tables of :mod:`tbd_taichi.tables` (tracks and truth), in pixels.
   than the gate from every target in view in that frame.
 * OSPA (Schuhmacher et al. 2008) per frame, with cut-off c (px) and order p,
   averaged over frames 0..n_frames−1 (0 where both sets are empty).
+* Güler 2016's MSE (Eq. 4.1b: mean over frames of the squared Euclidean error, px²) and max error (px) of the
+  track matched to a target (:func:`thesis_errors`).
 * Against labelled boxes: :func:`box_scores`; for a box tracker also the OTB measures (CLE, DP@20, mean IoU,
   AUC) of :mod:`tbd_taichi.otb`.
 """
@@ -25,6 +27,7 @@ from .errors import ParameterError
 
 T0 = 2.0  # px, Eq. 48
 T1 = 0.2  # Eq. 49
+MATCH_GATE = 5.0  # px: thesis_errors's track matched to a target
 OSPA_C = 5.0  # px
 OSPA_P = 2.0
 
@@ -137,6 +140,29 @@ def mean_ospa(tracks: np.ndarray, truth: np.ndarray, c: float = OSPA_C, p: float
     return float(np.mean([ospa(est.get(f, empty), tru.get(f, empty), c, p) for f in range(n_frames)]))
 
 
+def thesis_errors(tracks: np.ndarray, truth: np.ndarray, gate: float = MATCH_GATE) -> dict:
+    """Güler 2016's errors of the track matched to the target of ``truth`` (one target: one row per frame):
+    the track id with the most rows within ``gate`` px of the truth of their frame (a tie: the lower id), over
+    the frames where both have a row: ``mse`` = mean squared Euclidean error (Eq. 4.1b, px²), ``max_error`` =
+    the largest Euclidean error (px), ``frames`` = their count, ``track_id``.  No track within the gate in any
+    frame: NaNs, 0 frames, track_id None."""
+    where = {int(f): (x, y) for f, x, y in zip(truth["frame"], truth["x"], truth["y"])}
+    best = dict(mse=float("nan"), max_error=float("nan"), frames=0, track_id=None)
+    most = 0
+    for track in np.unique(tracks["track_id"]):
+        rows = tracks[(tracks["track_id"] == track) & np.isin(tracks["frame"], list(where))]
+        if not len(rows):
+            continue
+        true_xy = np.array([where[int(f)] for f in rows["frame"]], float)
+        d = edt(rows["x"], rows["y"], true_xy[:, 0], true_xy[:, 1])
+        near = int((d <= gate).sum())
+        if near > most:
+            most = near
+            best = dict(mse=float(np.mean(d ** 2)), max_error=float(d.max()), frames=int(len(d)),
+                        track_id=int(track))
+    return best
+
+
 def as_table(obj, columns: tuple[str, ...], name: str, optional: tuple[str, ...] = ()) -> np.ndarray:
     """``obj`` as a structured table with ``columns``: a structured array (or a dict of columns) that has them, or
     rows (a list of tuples, a 2-D array) in the order ``columns`` + ``optional``; else a ParameterError naming
@@ -172,7 +198,8 @@ def as_table(obj, columns: tuple[str, ...], name: str, optional: tuple[str, ...]
 
 def evaluate(tracks, truth, t0: float = T0, ospa_c: float = OSPA_C,
              ospa_p: float = OSPA_P, n_frames: int | None = None) -> dict:
-    """All metrics for one run: dsr, edt_mean, false_tracks, ospa, and per-target scores.  ``tracks``, ``truth``:
+    """All metrics for one run: dsr, edt_mean, false_tracks, ospa, mse and max_error (:func:`thesis_errors`: the
+    mean MSE and the largest max error over the targets with a matched track), and per-target scores.  ``tracks``, ``truth``:
     tables (or array-likes, :func:`as_table`); T0 ≥ 0, OSPA c > 0 and p ≥ 1 (px)."""
     from .validate import positive
 
@@ -182,12 +209,18 @@ def evaluate(tracks, truth, t0: float = T0, ospa_c: float = OSPA_C,
     positive("ospa_c", ospa_c)
     positive("ospa_p", ospa_p, 1.0, closed=True)
     scores = target_scores(tracks, truth, t0)
+    for target, s in scores.items():
+        e = thesis_errors(tracks, truth[truth["target_id"] == target])
+        s.update(mse=e["mse"], max_error=e["max_error"], matched_track=e["track_id"])
+    matched = [s for s in scores.values() if s["matched_track"] is not None]
     edts = [s["edt_mean"] for s in scores.values() if np.isfinite(s["edt_mean"])]
     return {
         "dsr": float(np.mean([s["dsr"] for s in scores.values()])) if scores else float("nan"),
         "edt_mean": float(np.mean(edts)) if edts else float("nan"),
         "false_tracks": false_tracks(tracks, truth, t0),
         "ospa": mean_ospa(tracks, truth, ospa_c, ospa_p, n_frames),
+        "mse": float(np.mean([s["mse"] for s in matched])) if matched else float("nan"),
+        "max_error": float(max(s["max_error"] for s in matched)) if matched else float("nan"),
         "tracks": int(len(np.unique(tracks["track_id"]))),
         "targets": {str(k): v for k, v in scores.items()},
     }

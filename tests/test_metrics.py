@@ -83,3 +83,28 @@ def test_mean_ospa_counts_empty_frames():
     tracks = tracks_from([(0, 1, 10.0, 20.0), (1, 1, 11.0, 20.0)])
     assert metrics.mean_ospa(tracks, truth, n_frames=4) == 0.0
     assert metrics.mean_ospa(tracks_from([(0, 1, 10.0, 20.0)]), truth, c=5) == pytest.approx(2.5)
+
+
+def test_thesis_errors_by_hand():
+    """Güler's Eq. 4.1b on a 4-frame line: the matched track is the one with the most rows within 5 px (track 2,
+    3 rows; track 1 has 2), scored over the frames where both have a row, its far frame included."""
+    truth = truth_line(4)  # (10, 20), (11, 20), (12, 20), (13, 20)
+    tracks = tracks_from([(0, 1, 10.0, 20.0), (1, 1, 11.0, 20.0),
+                          (1, 2, 11.0, 21.0), (2, 2, 12.0, 22.0), (3, 2, 16.0, 24.0), (7, 2, 0.0, 0.0),
+                          (0, 3, 60.0, 60.0)])
+    e = metrics.thesis_errors(tracks, truth)
+    assert e["track_id"] == 2 and e["frames"] == 3  # frame 7 has no truth
+    assert e["mse"] == pytest.approx((1 + 4 + 25) / 3) and e["max_error"] == pytest.approx(5.0)
+    s = metrics.evaluate(tracks, truth)
+    assert s["mse"] == pytest.approx(10.0) and s["max_error"] == pytest.approx(5.0)
+    assert s["targets"]["0"]["matched_track"] == 2
+
+
+def test_thesis_errors_without_a_match():
+    truth = truth_line(3)
+    e = metrics.thesis_errors(tracks_from([(0, 1, 10.0, 26.0), (1, 1, 50.0, 20.0)]), truth)
+    assert e["track_id"] is None and e["frames"] == 0 and math.isnan(e["mse"]) and math.isnan(e["max_error"])
+    s = metrics.evaluate(tracks_from([(0, 1, 10.0, 26.0)]), truth)
+    assert math.isnan(s["mse"]) and math.isnan(s["max_error"])
+    tie = tracks_from([(0, 4, 10.0, 21.0), (1, 3, 11.0, 22.0)])  # one row each within 5 px: the lower id
+    assert metrics.thesis_errors(tie, truth)["track_id"] == 3
