@@ -28,7 +28,7 @@ from .registry import MethodSpec, OneSequence, param, validate_params
 
 EXTRA_COLUMNS = ("w", "h")
 S_INIT_X, S_INIT_Y, S_RESAMPLE = 10, 11, 12  # host streams (the kernels use 0, 1)
-STAGES = ("features", "particles", "resampling")
+STAGES = ("features", "particles", "resampling")  # feature maps; propagate, weigh, estimate; resampling
 RANGE_PERCENTILES = (0.5, 99.5)  # each feature's bins span these percentiles of frame 0
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))  # Eq. 25, in units of Δd
 
@@ -130,15 +130,6 @@ class FeatureFusionTracker(OneSequence):
         self.frame = 0
         self.resampled: list[int] = []
         self.seconds = {s: 0.0 for s in STAGES}
-
-    @property
-    def frames_in(self) -> int:
-        return self.frame
-
-    @property
-    def timings(self) -> dict:
-        """Cumulative wall seconds per stage: feature maps, particles (propagate, weigh, estimate), resampling."""
-        return dict(self.seconds)
 
     def _weigh(self, first: int, count: int) -> None:
         self.k.weigh(first, count, *self.half, self.p.sigma_l, int(self.p.fusion == "adaptive"))

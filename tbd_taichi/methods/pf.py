@@ -105,17 +105,7 @@ class OriginalPF(OneSequence):
         self.declared = False
         self.rows: list[tuple] = []
         self.p_exist: list[float] = []
-        self.stage_seconds = {"normalise": 0.0, "filter": 0.0}
-
-    @property
-    def frames_in(self) -> int:
-        """Raw frames taken so far."""
-        return self.frame
-
-    @property
-    def timings(self) -> dict:
-        """Cumulative wall seconds per stage: normalise (background and σ), filter (step and estimates)."""
-        return dict(self.stage_seconds)
+        self.seconds = {"normalise": 0.0, "filter": 0.0}
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Step on one raw frame; returns [(frame, track_id, x, y, vx, vy, intensity, p_exist)] if declared."""
@@ -125,8 +115,8 @@ class OriginalPF(OneSequence):
         t1 = time.perf_counter()
         self.pool.step(self.frame, z, systematic=self.systematic)
         est = self.pool.estimates()
-        self.stage_seconds["normalise"] += t1 - t0
-        self.stage_seconds["filter"] += time.perf_counter() - t1
+        self.seconds["normalise"] += t1 - t0
+        self.seconds["filter"] += time.perf_counter() - t1
         p = float(est.p_exist[0])
         self.p_exist.append(p)
         out = []

@@ -40,9 +40,22 @@ class Tracker(Protocol):
 
 class OneSequence:
     """A tracker of one sequence: ``update`` after ``finish``, or a second ``finish``, is a ParameterError (the
-    tracker's state is spent; a new sequence takes a new tracker)."""
+    tracker's state is spent; a new sequence takes a new tracker).  ``frames_in`` and ``timings`` read ``frame`` and
+    ``seconds``, which the tracker keeps."""
 
     _finished = False
+    frame = 0  # raw frames taken so far
+    seconds: dict = {}  # cumulative wall seconds per stage (the tracker's STAGES)
+
+    @property
+    def frames_in(self) -> int:
+        """Raw frames taken so far."""
+        return self.frame
+
+    @property
+    def timings(self) -> dict:
+        """Cumulative wall seconds per stage (the tracker's STAGES: the benchmark's rows)."""
+        return dict(self.seconds)
 
     def _check_open(self, what: str) -> None:
         if self._finished:

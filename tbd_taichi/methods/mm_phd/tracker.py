@@ -139,11 +139,6 @@ class MMPHDTracker(OneSequence):
         self._backward = None
 
     @property
-    def frames_in(self) -> int:
-        """Raw frames taken so far."""
-        return self.frame
-
-    @property
     def timings(self) -> dict:
         """Cumulative wall seconds per stage (STAGES): normalise; particles (every kernel step: predict, births,
         likelihood, Ψ, update, class estimates, mask, resample); extraction (k-means captures, bookkeeping, new

@@ -17,7 +17,7 @@ from .params import multiaspect_params, particles, resolve
 from .pool import FILTERS, MultiaspectPool
 
 EXTRA_COLUMNS = ("aspect",)
-STAGES = ("local_mean", "gmrf", "particles")
+STAGES = ("local_mean", "gmrf", "particles")  # local mean; GMRF estimate; d-map and the filter step
 
 
 def entry_cells(shape, template_shape, entry: str) -> np.ndarray | None:
@@ -61,16 +61,6 @@ class MultiaspectTracker(OneSequence):
         self.rows: list[tuple] = []
         self.frame, self.track_id, self.declared = 0, 0, False
         self.seconds = {s: 0.0 for s in STAGES}
-
-    @property
-    def frames_in(self) -> int:
-        """Raw frames taken so far."""
-        return self.frame
-
-    @property
-    def timings(self) -> dict:
-        """Cumulative wall seconds per stage: local mean, GMRF estimate, particles (d-map and the filter step)."""
-        return dict(self.seconds)
 
     def clutter(self, y: np.ndarray) -> np.ndarray:
         """(β_h, β_v, σ_c²) of this frame: fixed, or Eq. 13's maximum likelihood warm-started at the last frame's."""

@@ -19,7 +19,7 @@ from ..registry import OneSequence
 from .params import FIRST_FRAMES, tophat_pf_params, window_lengths, window_of
 from .windows import eliminated, merged, strongest, trajectory_cost
 
-STAGES = ("candidates", "background", "particles", "windows")
+STAGES = ("candidates", "background", "particles", "windows")  # frames 0–2; Algs. 8–9; the SIR step; Alg. 5
 REPORTS = (1, 2)
 PATHS = ("online", "whole")
 DIAGNOSTIC_COLUMNS = ("window", "first_frame", "last_frame", "track_id", "x", "y", "cost", "evidence", "action")
@@ -78,15 +78,6 @@ class TophatPFTracker(OneSequence):
         from ...launch import Launcher
 
         return Launcher(backend.reusable(self, (concept,) + dims, lambda: cls(*dims)))
-
-    @property
-    def frames_in(self) -> int:
-        return self.frame
-
-    @property
-    def timings(self) -> dict:
-        """Cumulative wall seconds per stage: candidates (frames 0–2), background, particles, windows."""
-        return dict(self.seconds)
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Take one raw frame; return the rows reported now."""
