@@ -154,7 +154,7 @@ class TophatPFTracker(OneSequence):
         self.cost = trajectory_cost(path.astype(np.float64), self.p.epsilon)
         evidence = self._evidence()
         before = self.alive.copy()
-        alive = merged(path, self.alive, self.cost, self.p.merge_distance, self.reported)
+        alive = merged(path, self.alive, -evidence, self.p.merge_distance, self.reported)  # the stronger stays
         merged_away = before & ~alive
         if alive.sum() > 2:
             alive = eliminated(alive, self.cost, evidence, self.reported)

@@ -20,10 +20,10 @@ def kept_always(keep) -> set[int]:
     return {int(k) for k in np.atleast_1d(keep) if k >= 0}
 
 
-def merged(path: np.ndarray, alive: np.ndarray, cost: np.ndarray, distance: float, keep) -> np.ndarray:
+def merged(path: np.ndarray, alive: np.ndarray, rank: np.ndarray, distance: float, keep) -> np.ndarray:
     """``alive`` without the duplicates: of filters whose estimates stay within ``distance`` px of each other through
-    the whole window ``path`` (L, G, 2), the one of lower cost stays (the filters ``keep``, the confirmed and
-    reported ones, always stay)."""
+    the whole window ``path`` (L, G, 2), the one of lower ``rank`` stays (the tracker ranks by −evidence); the
+    filters ``keep``, the confirmed and reported ones, always stay."""
     out = alive.copy()
     live = np.nonzero(alive)[0]
     if len(live) < 2:
@@ -31,7 +31,7 @@ def merged(path: np.ndarray, alive: np.ndarray, cost: np.ndarray, distance: floa
     always = kept_always(keep)
     p = path[:, live]
     close = (np.hypot(*(p[:, :, None] - p[:, None, :]).transpose(3, 0, 1, 2)) <= distance).all(axis=0)
-    order = sorted(range(len(live)), key=lambda i: (live[i] not in always, cost[live[i]], live[i]))
+    order = sorted(range(len(live)), key=lambda i: (live[i] not in always, rank[live[i]], live[i]))
     kept: list[int] = []
     for i in order:
         if live[i] not in always and any(close[i, j] for j in kept):
