@@ -52,6 +52,13 @@ def row_half_widths(mask: np.ndarray) -> np.ndarray:
     return half.astype(np.int32)
 
 
+def se_geometry(se_size: int, se_shape: str) -> tuple[np.ndarray, int, np.ndarray]:
+    """The flat SE's mask, its radius R = size // 2 and each row's half-width (what the separable passes of the
+    kernel and of its NumPy twin run on)."""
+    mask = structuring_element(int(se_size), str(se_shape))
+    return mask, int(se_size) // 2, row_half_widths(mask)
+
+
 @ti.data_oriented
 class TophatKernels:
     """Fields for frames of ``shape`` (H, W) and a flat SE of odd ``se_size`` and ``se_shape`` ("square"/"disk")."""
@@ -59,15 +66,14 @@ class TophatKernels:
     def __init__(self, shape, se_size: int, se_shape: str):
         self.shape = (int(shape[0]), int(shape[1]))
         self.se_size, self.se_shape = int(se_size), str(se_shape)
-        self.mask = structuring_element(self.se_size, self.se_shape)
-        self.radius = self.se_size // 2
+        self.mask, self.radius, half = se_geometry(se_size, se_shape)
         h, w = self.shape
         self.u = ti.field(ti.f32, (h, w))  # U, Eq. 3.5
         self.eroded = ti.field(ti.f32, (h, w))  # −(U ⊖ B)
         self.opened = ti.field(ti.f32, (h, w))  # U ∘ B, Eq. 3.8
         self.levels = ti.field(ti.f32, (self.radius + 1, h, w))  # row maxima over |dx| ≤ level
         self.half = ti.field(ti.i32, self.se_size)  # the SE's half-width at row offset dy + R
-        self.half.from_numpy(row_half_widths(self.mask))
+        self.half.from_numpy(half)
 
     @ti.kernel
     def tophat(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), out: ti.types.ndarray(dtype=ti.f32, ndim=2)):

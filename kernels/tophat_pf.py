@@ -123,9 +123,8 @@ class TophatPFKernels:
         self.list_live()
         for p in range(count * n):
             g = p // n
-            if g < count:
-                self.x[p] = init[g, 0] + sigma_0 * normal_at(w, k, phi, kx, p)
-                self.y[p] = init[g, 1] + sigma_0 * normal_at(w, k, phi, ky, p)
+            self.x[p] = init[g, 0] + sigma_0 * normal_at(w, k, phi, kx, p)
+            self.y[p] = init[g, 1] + sigma_0 * normal_at(w, k, phi, ky, p)
 
     @ti.kernel
     def set_alive(self, alive: ti.types.ndarray(dtype=ti.i32, ndim=1)):
@@ -168,23 +167,22 @@ class TophatPFKernels:
         for q in range(self.n_live[None] * n):
             g = self.live[q // n]
             p = g * n + q % n
-            if self.alive[g] == 1:
-                bx, by = self.drift[g, 0], self.drift[g, 1]
-                x = self.x[p] + bx + c * normal_at(tw, tk, tphi, kx, p)
-                y = self.y[p] + by + c * normal_at(tw, tk, tphi, ky, p)
-                self.xp[p] = x
-                self.yp[p] = y
-                col = ti.cast(ti.floor(x + 0.5), ti.i32)
-                row = ti.cast(ti.floor(y + 0.5), ti.i32)
-                lw = ti.f32(NEG_INF)
-                if 0 <= col < w and 0 <= row < h:
-                    z = self.ref[g]
-                    lw = (z * self.s[row, col] - 0.5 * z * z) * inv_var  # Eq. 3.14 over the noise density
-                    if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
-                        dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
-                        dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
-                        lw -= (dx * dx + dy * dy) * inv_2sv2
-                self.logw[p] = lw
+            bx, by = self.drift[g, 0], self.drift[g, 1]
+            x = self.x[p] + bx + c * normal_at(tw, tk, tphi, kx, p)
+            y = self.y[p] + by + c * normal_at(tw, tk, tphi, ky, p)
+            self.xp[p] = x
+            self.yp[p] = y
+            col = ti.cast(ti.floor(x + 0.5), ti.i32)
+            row = ti.cast(ti.floor(y + 0.5), ti.i32)
+            lw = ti.f32(NEG_INF)
+            if 0 <= col < w and 0 <= row < h:
+                z = self.ref[g]
+                lw = (z * self.s[row, col] - 0.5 * z * z) * inv_var  # Eq. 3.14 over the noise density
+                if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
+                    dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
+                    dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
+                    lw -= (dx * dx + dy * dy) * inv_2sv2
+            self.logw[p] = lw
 
     @ti.func
     def normalise(self, frame: ti.i32):

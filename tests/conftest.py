@@ -38,3 +38,19 @@ def csv_by_threads(tmp_path):
             outs.append(out.read_bytes())
         return outs
     return run
+
+
+@pytest.fixture
+def simulate_error(tmp_path, capsys):
+    """``run(scenario, argv)``: ``tbd-taichi simulate --scenario SCENARIO *argv --out …`` in this process; returns
+    (exit code, stderr, whether the .npz was written)."""
+    def run(scenario, argv):
+        from tbd_taichi import cli
+
+        out = tmp_path / "scene.npz"
+        try:
+            code = cli.main(["simulate", "--scenario", scenario, *argv, "--out", str(out)])
+        except SystemExit as exc:
+            code = exc.code
+        return code, capsys.readouterr().err, out.exists()
+    return run

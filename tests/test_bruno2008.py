@@ -225,15 +225,11 @@ def test_simulate_cli_writes_the_scene(tmp_path, capsys):
     (["--frames", "2"], "--frames"), (["--case", "5.1"], "--case applies to --scenario long2012"),
     (["--snr-db", "10"], "--snr-db applies to --scenario long2012"), (["--snr", "2"], "--snr applies"),
     (["--shape", "40", "40"], "--shape applies")])
-def test_simulate_cli_errors(tmp_path, capsys, argv, message):
+def test_simulate_cli_errors(simulate_error, argv, message):
     """A bad or foreign argument of bruno2008 is one line naming it, exit 2, and nothing is written."""
-    try:
-        code = cli.main(["simulate", "--scenario", "bruno2008", *argv, "--out", str(tmp_path / "b.npz")])
-    except SystemExit as exc:
-        code = exc.code
-    err = capsys.readouterr().err
+    code, err, written = simulate_error("bruno2008", argv)
     assert code == 2 and message in err and err.count("\n") == 1
-    assert not (tmp_path / "b.npz").exists()
+    assert not written
 
 
 @pytest.mark.parametrize("argv, message", [

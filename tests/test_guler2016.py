@@ -334,15 +334,11 @@ def test_simulate_cli_wall_seed(tmp_path, capsys):
     (["--snr", "2"], "--snr applies to --scenario jia2022"), (["--ptcr", "3"], "--ptcr applies"),
     (["--sequence", "weak"], "--sequence applies"), (["--wall-seed", "-1"], "--wall-seed"),
     (["--wall-seed", "1.5"], "--wall-seed"), (["--wall-seed", "x"], "--wall-seed")])
-def test_simulate_cli_errors(tmp_path, capsys, argv, message):
+def test_simulate_cli_errors(simulate_error, argv, message):
     """A bad or foreign argument is one line naming it, exit 2, and nothing is written."""
-    try:
-        code = cli.main(["simulate", "--scenario", "guler2016", *argv, "--out", str(tmp_path / "g.npz")])
-    except SystemExit as exc:
-        code = exc.code
-    err = capsys.readouterr().err
+    code, err, written = simulate_error("guler2016", argv)
     assert code == 2 and message in err and err.count("\n") == 1, err
-    assert not (tmp_path / "g.npz").exists()
+    assert not written
 
 
 @pytest.mark.parametrize("argv, message", [

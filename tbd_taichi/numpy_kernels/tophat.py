@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.tophat import SHAPES, row_half_widths, structuring_element
+from ..kernels.tophat import SHAPES, se_geometry, structuring_element
 
 __all__ = ["SHAPES", "TophatKernels", "structuring_element"]
 
@@ -18,9 +18,7 @@ class TophatKernels:
     def __init__(self, shape, se_size: int, se_shape: str):
         self.shape = (int(shape[0]), int(shape[1]))
         self.se_size, self.se_shape = int(se_size), str(se_shape)
-        self.mask = structuring_element(self.se_size, self.se_shape)
-        self.radius = self.se_size // 2
-        self.half = row_half_widths(self.mask)
+        self.mask, self.radius, self.half = se_geometry(se_size, se_shape)
 
     def tophat(self, frame: np.ndarray, out: np.ndarray) -> None:
         """out = U − (U ⊖ B) ⊕ B (Eq. 3.10), U = frame minus its row means (Eqs. 3.4–3.5), f32 (H, W)."""
