@@ -48,6 +48,8 @@ SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # colum
 # from SUM_ASPECT
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
+SERIAL_PIXELS = 1 << 16  # d-maps up to this many pixels are computed in the launching thread (no task start)
+
 
 def template_pixels(templates: np.ndarray, support: int, row_length: int) -> tuple:
     """Each aspect's non-zero pixels, padded to ``support``: (offsets, values, counts), (K, support) arrays and (K,),
@@ -105,7 +107,10 @@ class MultiaspectKernels:
         self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
         self.blw = ti.field(ti.f32, c)
         self.tables, self.exp_tables = NormalTables(), ExponentialTables()
-        self.span = thread_span(serial)
+        # one group: its serial per-group loops run in the launching thread (a parallel task costs ~0.08 ms to start)
+        self.serial_groups = serial or self.groups == 1
+        self.span = thread_span(self.serial_groups)
+        self.serial_pixels = serial or self.groups * h * w <= SERIAL_PIXELS  # a small d-map: one thread, no task
 
     # ------------------------------------------------------------------ Eq. 16
 
@@ -115,15 +120,19 @@ class MultiaspectKernels:
         + right) − β_v·(up + down), y = 0 outside the image (Eq. 16), into the padded d (its border stays 0)."""
         h, w = ti.static(self.shape)
         hh, hw = ti.static(self.halves)
-        for g, r, c in ti.ndrange(self.groups, h, w):  # one loop: a second would be a second task (~0.07 ms)
-            if r == 0 and c < N_GPAR:
-                self.gpar[g, c] = gpar[g, c]
+        ti.loop_config(serialize=self.serial_pixels)
+        for g, r in ti.ndrange(self.groups, h):  # one loop of rows: a second would be a second task (~0.08 ms)
+            if r == 0:
+                for i in range(N_GPAR):
+                    self.gpar[g, i] = gpar[g, i]
             bh, bv = gpar[g, 0], gpar[g, 1]
-            left = y[g, r, c - 1] if c > 0 else 0.0
-            right = y[g, r, c + 1] if c < w - 1 else 0.0
-            up = y[g, r - 1, c] if r > 0 else 0.0
-            down = y[g, r + 1, c] if r < h - 1 else 0.0
-            self.d[self.d_index(g, r + 2 * hh, c + 2 * hw)] = y[g, r, c] - bh * (left + right) - bv * (up + down)
+            base = self.d_index(g, r + 2 * hh, 2 * hw)
+            for c in range(w):
+                left = y[g, r, c - 1] if c > 0 else 0.0
+                right = y[g, r, c + 1] if c < w - 1 else 0.0
+                up = y[g, r - 1, c] if r > 0 else 0.0
+                down = y[g, r + 1, c] if r < h - 1 else 0.0
+                self.d[base + c] = y[g, r, c] - bh * (left + right) - bv * (up + down)
 
     @ti.func
     def d_index(self, g: ti.i32, row: ti.i32, col: ti.i32) -> ti.i32:
@@ -331,6 +340,7 @@ class MultiaspectKernels:
         * gather: cur[j] ← prop[pick[j]] with its ℓ and anc[j] ← pick[j] (the ancestor in prev); ``final`` (the
           APF's post-sampling selection): prev[j] on the side other than ``side`` ← prop[pick[j]] instead."""
         span = ti.static(self.span)
+        ti.loop_config(serialize=self.serial_groups)
         for it in range(self.groups * span):
             if it % span == 0:
                 self.resample_group(it // span, seed, frame, number, second_stage, final, 1 - side)
@@ -410,6 +420,7 @@ class MultiaspectKernels:
         """out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect) of prev's side
         ``side``, per group in one thread (f64, slot order)."""
         span = ti.static(self.span)
+        ti.loop_config(serialize=self.serial_groups)
         for it in range(self.groups * span):
             if it % span == 0:
                 g = it // span
