@@ -21,6 +21,9 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 import taichi as ti  # noqa: E402
 
 from .errors import BackendError  # noqa: E402
+from . import compile_speed  # noqa: E402
+
+compile_speed.install()  # before any kernel module is imported (its decorators run at import)
 
 ARCH_NAMES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 # compiled kernels kept on disk; Taichi's default 100 MiB evicts kernels that a test run, or a
@@ -106,6 +109,7 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
                   fast_math=False)  # IEEE f32: the NumPy twins reproduce the same bits
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
+    compile_speed.install(debug=bool(debug))
     before = _thread_ids()
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # drop "[Taichi] Starting on arch=..."

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, methods, metrics, tables, validate
+from . import backend, compile_stats, methods, metrics, tables, validate
 from .cli_simulate import add_simulate_parser
 from .cli_track import FRONTEND_PROCESS_HELP, add_track_parser, format_scores
 from .errors import TBDError
@@ -358,6 +358,7 @@ def main(argv=None) -> int:
         check = getattr(args, "check", None)
         args.checked = check(args) if check else None
         backend.keep_freed_memory()
+        compile_stats.start_counting()
         backend.init(args.arch, threads=args.threads)
         return args.func(args)
     except TBDError as exc:

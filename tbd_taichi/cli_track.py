@@ -236,17 +236,21 @@ def seconds_since_start() -> float:
         return time.monotonic() - IMPORTED_AT
 
 
-def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, float, np.ndarray | None]:
-    """Stream the input through the tracker: (tracks, frames, tracker seconds, the max-projection if a plot is
+def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, RunTiming, np.ndarray | None]:
+    """Stream the input through the tracker: (tracks, frames, its timing, the max-projection if a plot is
     wanted).  Streamed rows go to ``writer`` as they come."""
     from . import io
+    from .compile_stats import compile_totals
     from .progress import frame_progress
 
+    before = compile_totals()
     tracker = methods.make_tracker(args.method, plan.source.shape, seed=args.seed, engine=args.engine,
                                    init_box=plan.init_box, profile=plan.profile, **plan.settings)
-    max_projection, frames, busy = None, 0, 0.0
+    max_projection, frames, busy, first_frame_at = None, 0, 0.0, None
+    in_updates = compile_totals()  # kernels built by the tracker's constructor are start-up's
     with frame_progress("tracking", plan.source.n_frames, args.progress) as progress:
         for frame in io.iter_frames(plan.source, min_frames=plan.spec.min_frames):
+            first_frame_at = seconds_since_start() if first_frame_at is None else first_frame_at
             started = time.perf_counter()
             rows = tracker.update(frame)
             busy += time.perf_counter() - started
@@ -263,7 +267,45 @@ def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, fl
     if plan.source.kind == "video" and plan.source.n_frames and frames < plan.source.n_frames:
         say(f"warning: {plan.source.name} declares {plan.source.n_frames} frames but only {frames} could be "
             "decoded (a truncated or damaged file?)", err=True)
-    return final, frames, busy, max_projection
+    after = compile_totals()
+    timing = RunTiming(frames, first_frame_at or seconds_since_start(), after.since(before), busy,
+                       after.since(in_updates).seconds)
+    return final, frames, timing, max_projection
+
+
+@dataclass(frozen=True)
+class RunTiming:
+    """Where a ``track`` run's time went: ``startup_s`` from the process start to the first frame's update
+    (imports, checks, the backend, the tracker; kernels built there included); ``compiled``: the kernels built
+    in the run (:mod:`.compile_stats`); ``busy_s``: the tracker's update and finish calls, of which
+    ``compile_in_updates_s`` built kernels (Taichi compiles a kernel at its first call)."""
+
+    frames: int
+    startup_s: float
+    compiled: object
+    busy_s: float
+    compile_in_updates_s: float
+
+    @property
+    def steady_fps(self) -> float:
+        """Frames per second of the tracker without building kernels."""
+        steady = self.busy_s - self.compile_in_updates_s
+        return self.frames / steady if steady > 0 else float("nan")
+
+    def summary(self, wall_s: float) -> dict:
+        """The JSON fields: start-up, compile, tracker and end-to-end rates."""
+        return {"startup_s": round(self.startup_s, 3), **self.compiled.as_dict(),
+                "tracker_fps": self.frames / self.busy_s if self.busy_s > 0 else float("nan"),
+                "steady_fps": self.steady_fps, "wall_s": wall_s,
+                "end_to_end_fps": self.frames / wall_s if wall_s > 0 else float("nan")}
+
+    def line(self, wall_s: float) -> str:
+        """The timing line ``track`` prints."""
+        c = self.compiled
+        return (f"timing: start-up {self.startup_s:.1f} s; {c.kernels} kernel(s) built in {c.seconds:.1f} s "
+                f"(front end {c.front_end_s:.1f} s, machine code or cache {c.first_launch_s:.1f} s); tracker "
+                f"{self.steady_fps:.0f} frames/s without them; end to end {wall_s:.1f} s "
+                f"({self.frames / wall_s if wall_s > 0 else float('nan'):.1f} frames/s)")
 
 
 def box_centres(boxes: np.ndarray) -> np.ndarray:
@@ -320,7 +362,7 @@ def cmd_track(args) -> int:
 
     say(describe(plan.profile, plan.why, profile_settings(plan.spec, plan.profile), plan.given))
     with tables.CsvTableWriter(plan.out, plan.columns) as writer:
-        final, frames, busy, max_projection = run_tracker(plan, args, writer, say)
+        final, frames, timing, max_projection = run_tracker(plan, args, writer, say)
     tracks = tables.read_tracks(plan.out) if plan.streamed else final  # streamed rows live only in the file
     n_tracks = len(np.unique(tracks["track_id"]))
     scores = None
@@ -341,11 +383,12 @@ def cmd_track(args) -> int:
         fps = args.fps or plan.source.fps or FALLBACK_FPS
         n = write_overlay_video(io.iter_frames(plan.source), tracks, plan.outputs["video"], fps=fps)
         say(f"video ({n} frames, {fps:g} fps) -> {plan.outputs['video']}")
+    wall = seconds_since_start()
     summary = dict(method=args.method, input=str(args.input), out=str(plan.out), frames=frames, tracks=n_tracks,
-                   rows=int(len(tracks)), tracker_fps=frames / busy if busy > 0 else float("nan"),
-                   wall_s=seconds_since_start(), profile=plan.profile, profile_reason=plan.why)
+                   rows=int(len(tracks)), **timing.summary(wall), profile=plan.profile, profile_reason=plan.why)
+    say(timing.line(wall))
     say(f"{args.method}: {frames} frames, {n_tracks} track(s) ({len(tracks)} rows) -> {plan.out}; tracker "
-        f"{summary['tracker_fps']:.1f} frames/s, wall {summary['wall_s']:.1f} s with start-up; profile {plan.profile}")
+        f"{summary['tracker_fps']:.1f} frames/s, wall {wall:.1f} s with start-up; profile {plan.profile}")
     if args.json:
         print(json.dumps({**summary, "scores": scores}, allow_nan=True, default=_jsonable))
     return 0

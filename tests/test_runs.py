@@ -94,6 +94,10 @@ def test_track_summarises_the_run_and_scores_box_truth(clip, capsys):
     assert summary["frames"] == 40 and summary["profile"] == "real-video"
     assert summary["tracks"] == len(np.unique(tables.read_tracks(clip / "t.csv")["track_id"]))
     assert summary["tracker_fps"] > 0 and summary["wall_s"] > 0
+    assert summary["startup_s"] > 0 and summary["kernels"] >= 0 and summary["compile_s"] >= 0
+    assert summary["steady_fps"] >= summary["tracker_fps"]  # without the kernels built in the updates
+    assert summary["end_to_end_fps"] == pytest.approx(40 / summary["wall_s"])
+    assert any(line.startswith("timing: start-up ") and "kernel(s) built" in line for line in err.splitlines())
     scores = summary["scores"]
     assert scores["truth"] == "boxes" and scores["detection_rate"] > 0.5 and scores["false_points"] < 0.1
     assert scores["centre_error"] < 3 and np.isnan(scores["iou"])  # a point tracker has no box

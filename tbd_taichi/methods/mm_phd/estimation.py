@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.cluster.vq import kmeans2
-from scipy.stats import chi2
+from scipy.special import chdtri  # χ² quantiles (scipy.stats.chi2.ppf calls the same)
 
 from ...kernels.phd import EST_COV, EST_MASS, EST_MEAN, EST_PEAK, EST_PROB
 from ...motion_models import DIM, X, Y
@@ -137,5 +137,5 @@ def gated(capture: Capture, dims, probability: float) -> np.ndarray:
         m = np.einsum("pi,ij,pj->p", d, np.linalg.inv(cov), d)
     except np.linalg.LinAlgError:
         return np.ones(len(d), bool)
-    keep = m <= chi2.ppf(probability, len(dims))
+    keep = m <= chdtri(len(dims), 1.0 - probability)
     return keep if keep.any() else np.ones(len(d), bool)
