@@ -58,7 +58,7 @@ class FeatureFusionKernels:
         self.loglik, self.rho = ti.field(ti.f32, self.n), ti.field(ti.f32, self.n)
         self.fusion = ti.field(ti.f32, (self.n, FEATURES))
         self.logw = ti.field(ti.f64, self.n)  # accumulated log-weights (slot n − 1, the estimate, unused)
-        self.tables = NormalTables()
+        self.tables = NormalTables.shared()
 
     # ------------------------------------------------------------------ Eqs. 12, 14–18: per-pixel maps
 

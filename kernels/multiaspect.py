@@ -106,7 +106,7 @@ class MultiaspectKernels:
         self.birth_cdf = ti.field(ti.f64, (g, self.n_cells))
         self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
         self.blw = ti.field(ti.f32, c)
-        self.tables, self.exp_tables = NormalTables(), ExponentialTables()
+        self.tables, self.exp_tables = NormalTables.shared(), ExponentialTables.shared()
         # one group: its serial per-group loops run in the launching thread (a parallel task costs ~0.08 ms to start)
         self.serial_groups = serial or self.groups == 1
         self.span = thread_span(self.serial_groups)

@@ -90,7 +90,7 @@ class PhdKernels:
         self.F, self.F_inv, self.L = (ti.field(ti.f32, (MAX_MODELS, DIM, DIM)) for _ in range(3))
         # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
         self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
-        self.tables = NormalTables()
+        self.tables = NormalTables.shared()
         self.span = thread_span(serial)
 
     # ------------------------------------------------------------------ propagate (Eqs. 1, 26, 28–34)

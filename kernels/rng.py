@@ -74,9 +74,30 @@ def table_field(values: np.ndarray, dtype):
     return field
 
 
+_SHARED: dict = {}  # tables class -> (the Taichi program they belong to, the instance)
+
+
+def shared_tables(cls):
+    """The one instance of tables class ``cls`` in the running Taichi program, built at the first call: every
+    kernel class reads the same constant fields (each field filled from NumPy compiles a kernel of its own)."""
+    from taichi.lang import impl
+
+    program = impl.get_runtime().prog
+    entry = _SHARED.get(cls)
+    if entry is None or entry[0] is not program:
+        entry = _SHARED[cls] = (program, cls())
+    return entry[1]
+
+
 @ti.data_oriented
 class NormalTables:
-    """The ziggurat tables as fields (build after ``ti.init``); pass ``w, k, phi`` to :func:`normal_at`."""
+    """The ziggurat tables as fields (build after ``ti.init``); pass ``w, k, phi`` to :func:`normal_at`.
+    Kernel classes take :meth:`shared` ones."""
+
+    @classmethod
+    def shared(cls) -> "NormalTables":
+        """This program's one instance (:func:`shared_tables`)."""
+        return shared_tables(cls)
 
     def __init__(self):
         w, k, phi = ziggurat_tables()
@@ -86,6 +107,11 @@ class NormalTables:
 @ti.data_oriented
 class ExponentialTables:
     """The exponential ziggurat's tables as fields; pass ``w, k, f`` to :func:`exponential_at`."""
+
+    @classmethod
+    def shared(cls) -> "ExponentialTables":
+        """This program's one instance (:func:`shared_tables`)."""
+        return shared_tables(cls)
 
     def __init__(self):
         w, k, f = exponential_tables()

@@ -58,7 +58,7 @@ class TophatPFKernels:
         self.summary = ti.field(ti.f32, (self.groups, len(SUMMARY)))
         self.config = ti.field(ti.f32, len(CONFIG))
         self.seed = ti.field(ti.u32, ())
-        self.tables = NormalTables()
+        self.tables = NormalTables.shared()
 
     @ti.kernel
     def configure(self, seed: ti.u32, values: ti.types.ndarray(dtype=ti.f32, ndim=1)):

@@ -124,6 +124,17 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
     return _current
 
 
+def shutdown() -> None:
+    """End the Taichi runtime (``ti.reset``: Taichi writes its offline cache then); the next :func:`init` starts a
+    new one, and fields made before belong to the old runtime (see :func:`generation`)."""
+    global _current, _generation
+    ti.reset()
+    _current = None
+    _pinned.clear()
+    _generation += 1
+    _spare.clear()
+
+
 def _thread_ids() -> set[int]:
     """Ids of this process's threads (Linux; empty elsewhere)."""
     try:
@@ -302,3 +313,51 @@ def from_host(target, array) -> None:
     if array.shape != tuple(target.shape):
         raise ValueError(f"array of shape {array.shape} does not fit a field of shape {tuple(target.shape)}")
     _transfer_kernel("array_to_field", array.ndim)(array, target, serial_loops(array.size))
+
+
+BATCH_DTYPES = ("f32", "f64", "i32", "u32")  # field dtypes a batch write holds exactly in f64
+
+
+def _batchable(field) -> bool:
+    from taichi.lang.field import ScalarField
+
+    return isinstance(field, ScalarField) and str(field.dtype) in BATCH_DTYPES
+
+
+def from_host_many(target, arrays: dict) -> None:
+    """``target.name`` ← ``arrays[name]`` for each name (converted to the attribute's dtype and shape): NumPy
+    attributes by assignment; Taichi scalar fields of f32, f64, i32 or u32 by one kernel for all of them
+    (``kernels.transfer.arrays_to_fields``: a setup writing twenty fields compiles one kernel, not twenty);
+    other fields by :func:`from_host`."""
+    batch, parts = [], []
+    for name, array in arrays.items():
+        field = getattr(target, name)
+        if isinstance(field, np.ndarray) or not _batchable(field):
+            from_host(field, array)
+            continue
+        array = np.asarray(array)
+        if array.shape != tuple(field.shape):
+            raise ValueError(f"{name}: array of shape {array.shape} does not fit a field of shape {tuple(field.shape)}")
+        batch.append(field)
+        parts.append(array.astype(np.float64).ravel())
+    if batch:
+        from .kernels.transfer import arrays_to_fields
+
+        offsets = tuple(int(v) for v in np.cumsum([0] + [p.size for p in parts[:-1]]))
+        arrays_to_fields(np.concatenate(parts), tuple(batch), offsets)
+
+
+def zero_many(target, names) -> None:
+    """``target.name`` ← 0 for each name: NumPy attributes in place, Taichi fields by one kernel
+    (``kernels.transfer.zero_fields``)."""
+    fields = []
+    for name in names:
+        field = getattr(target, name)
+        if isinstance(field, np.ndarray):
+            field[...] = 0
+        else:
+            fields.append(field)
+    if fields:
+        from .kernels.transfer import zero_fields
+
+        zero_fields(tuple(fields))

@@ -14,6 +14,7 @@ import numpy as np
 from . import backend, compile_stats, methods, metrics, tables, validate
 from .cli_simulate import add_simulate_parser
 from .cli_track import FRONTEND_PROCESS_HELP, add_track_parser, format_scores
+from .cli_warmup import add_warmup_parser
 from .errors import TBDError
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
@@ -348,6 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     be.add_argument("--frontend-process", action="store_true", help=FRONTEND_PROCESS_HELP)
     _common(be)
     be.set_defaults(func=cmd_bench, check=check_bench)
+
+    add_warmup_parser(sub, _common)
     return parser
 
 

@@ -40,7 +40,8 @@ def taichi_front_end():
         return None
     needed = (hasattr(ASTTransformerContext, "get_pos_info"), hasattr(kernel_impl, "_get_tree_and_ctx"),
               hasattr(kernel_impl, "_get_global_vars"), hasattr(kernel_impl, "ASTTransformerContext"),
-              hasattr(kernel_impl, "_inside_class"), hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"))
+              hasattr(kernel_impl, "_inside_class"), hasattr(kernel_impl, "_KERNEL_CLASS_STACKFRAME_STMT_RES"),
+              hasattr(kernel_impl, "getsourcelines"), hasattr(kernel_impl, "getsourcefile"))
     if not all(needed):
         return None
     params = list(inspect.signature(kernel_impl._get_tree_and_ctx).parameters)
@@ -70,11 +71,13 @@ def brief_position(ctx, node) -> str:
 
 def function_source(func) -> tuple:
     """(file, source lines as Taichi normalises them, first line number, dedented text) of ``func``, read once."""
+    from taichi.lang import kernel_impl  # Taichi's own source lookup (it also finds IPython and Blender sources)
+
     entry = _SOURCES.get(func)
     if entry is None:
-        lines, start = inspect.getsourcelines(func)
+        lines, start = kernel_impl.getsourcelines(func)
         lines = [textwrap.fill(line, tabsize=4, width=9999) for line in lines]
-        entry = (inspect.getsourcefile(func), lines, start, textwrap.dedent("\n".join(lines)))
+        entry = (kernel_impl.getsourcefile(func), lines, start, textwrap.dedent("\n".join(lines)))
         _SOURCES[func] = entry
     return entry
 

@@ -134,34 +134,23 @@ class ParticlePool:
             self.k = Launcher(backend.reusable(self, (Kernels.__name__,) + dims, lambda: Kernels(*dims)))
         else:
             self.k = Kernels(*dims)
-        slot_group = np.repeat(np.arange(self.n_groups, dtype=np.int32), caps)
-        self._put("slot_group", slot_group)
-        self._put("off", self.off)
-        self._put("cap", self.caps)
-        self._put("tile_group", tile_group)
-        self._put("tile_start", np.array([t[1] for t in tiles], np.int32))
-        self._put("gt0", gt0)
-        self._put("gt1", gt1)
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
-        self._put("best_e", np.zeros(self.n_groups, np.float32))  # largest E = 1 log-weight per group, from weigh
-        # C_* (f64 here: the Taichi field rounds to f32 as a scalar argument would, the NumPy twin keeps them)
-        self._put("constants", np.array([q1, q2, intensity_floor, psf_sigma, noise_sigma], np.float64))
-        self._put("seed_key", np.array([self.seed], np.uint32))
         self._no_seq = np.zeros(1, np.int32)  # step's Seq output when none is read
         self._z = self._bordered_frame()  # the normalised frame weigh reads, zero-bordered
         self._step_z = self._bordered_frame()  # step's copy of its frame
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
-        for name, value in list(self.params.items()) + [("kind", self.kinds)]:
-            self._put(name, value)
-        for name in ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born"):  # reused fields start clean
-            target = getattr(self.k, name)
-            if isinstance(target, np.ndarray):
-                target[...] = 0
-            else:
-                target.fill(0)
+        backend.from_host_many(self.k, {  # one kernel on the Taichi engine
+            "slot_group": np.repeat(np.arange(self.n_groups, dtype=np.int32), caps), "off": self.off,
+            "cap": self.caps, "tile_group": tile_group, "tile_start": np.array([t[1] for t in tiles], np.int32),
+            "gt0": gt0, "gt1": gt1,
+            "best_e": np.zeros(self.n_groups, np.float32),  # largest E = 1 log-weight per group, from weigh
+            # C_* (f64 here: the Taichi field rounds to f32 as a scalar argument would, the NumPy twin keeps them)
+            "constants": np.array([q1, q2, intensity_floor, psf_sigma, noise_sigma], np.float64),
+            "seed_key": np.array([self.seed], np.uint32), **self.params, "kind": self.kinds})
+        backend.zero_many(self.k, ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born"))  # reused fields
         self.set_proposal_map({})
 
     @staticmethod

@@ -223,15 +223,10 @@ class TaichiSaliencyEngine:
         f.params32[1] = lef_memory  # γ; snr, N and A in second_layer_and_blocks
         f.params32[2] = lef_scale
         self.params = None  # (snr, A) last written to f
-        backend.from_host(f.valid, valid)
-        backend.from_host(f.d, d)
-        backend.from_host(f.row_base, grid.row_base)
-        backend.from_host(f.col_block, grid.col_block)
-        backend.from_host(f.block_offset, grid.offsets)
+        backend.from_host_many(f, {"valid": valid, "d": d, "row_base": grid.row_base, "col_block": grid.col_block,
+                                   "block_offset": grid.offsets})
         f.block_max.fill(ks.NEG_INF)
-        f.proposal.fill(0)
-        f.n_written.fill(0)
-        f.memory.fill(0)
+        backend.zero_many(f, ("proposal", "n_written", "memory"))
         self.host_lanes = np.zeros((self.shape[0], self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
         self.host_proposal = None  # the last emitted frame's proposal, until proposal_copy hands it over
 

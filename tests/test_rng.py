@@ -192,3 +192,24 @@ def test_same_numbers_with_one_and_two_threads():
     finally:
         tbd_taichi.init(TEST_ARCH)
     assert all(np.array_equal(a, b) for a, b in zip(one, two))
+
+
+def test_kernel_classes_share_one_set_of_tables_per_runtime():
+    """Each table field filled from NumPy compiles a kernel: every kernel class takes the runtime's one instance,
+    and a restarted runtime gets new tables (the old fields are gone with it)."""
+    import tbd_taichi
+    from tbd_taichi import backend
+    from tbd_taichi.kernels.tophat_pf import TophatPFKernels
+
+    tbd_taichi.init("cpu")
+    first = trng.NormalTables.shared()
+    assert trng.NormalTables.shared() is first and trng.ExponentialTables.shared() is trng.ExponentialTables.shared()
+    assert TophatPFKernels(2, 4, (8, 9), 3).tables is first
+    w, k, phi = trng.ziggurat_tables()
+    assert np.array_equal(first.w.to_numpy(), w) and np.array_equal(first.phi.to_numpy(), phi)
+    tbd_taichi.init("cpu", threads=1)  # another runtime
+    try:
+        assert trng.NormalTables.shared() is not first
+    finally:
+        tbd_taichi.init("cpu")
+    assert backend.current().threads is None

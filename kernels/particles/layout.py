@@ -100,7 +100,7 @@ class LayoutMixin:
         self.tile_moments = f64(n_tiles, N_MOMENTS)
         self.map_pixel, self.map_seq, self.map_cdf = i32(map_capacity), i32(map_capacity), f64(map_capacity)
         self.map_off, self.map_n, self.map_total = i32(g), i32(g), f64(g)
-        self.normal, self.exponential = NormalTables(), ExponentialTables()
+        self.normal, self.exponential = NormalTables.shared(), ExponentialTables.shared()
 
     @ti.func
     def step_values(self, frame: ti.i32, b: ti.i32):
