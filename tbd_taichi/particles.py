@@ -194,9 +194,8 @@ class ParticlePool:
         values = dict(pb=pb, pd=pd, mu=mu, bx0=x0, bx1=x1, by0=y0, by1=y1, vmax=vmax, imin=intensity[0], imax=intensity[1])
         for name, value in values.items():
             self.params[name][groups] = value
-            self._put(name, self.params[name])
         self.kinds[groups] = BIRTH_KINDS[kind]
-        self._put("kind", self.kinds)
+        backend.from_host_many(self.k, {**{name: self.params[name] for name in values}, "kind": self.kinds})
 
     def set_proposal_map(self, per_group: dict, labels: np.ndarray | None = None) -> None:
         """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64.
