@@ -3,7 +3,9 @@ container's, a cluster job's) load them from Taichi's offline cache instead of c
 
 Each method runs over a short simulated sequence (the bench's frames where the method has its own) under each
 requested profile, with the same defaults ``tbd-taichi track`` uses, so its searching and tracking kernels are
-built; then the runtime is ended, which writes the offline cache."""
+built.  Each run has a runtime of its own, ended after it (which writes the offline cache): the cache's keys
+depend on the fields made before in the runtime, so a kernel built after another method's would be stored under
+a key that a ``track`` process, which makes one tracker, never asks for."""
 from __future__ import annotations
 
 import json
@@ -38,7 +40,7 @@ def add_warmup_parser(sub, common) -> None:
     wa.add_argument("--profile", choices=PROFILE_CHOICES, default="both",
                     help="the settings profile(s) to compile for: paper, real-video or both (default); a method "
                          "whose profiles give the same settings runs once (profile 'any')")
-    wa.add_argument("--frames", type=number(whole, 1), default=DEFAULT_FRAMES,
+    wa.add_argument("--frames", type=number(whole, 1), default=DEFAULT_FRAMES, metavar="N",
                     help=f"frames per run, at least the method's minimum (default {DEFAULT_FRAMES})")
     wa.add_argument("--json", action="store_true", help="print one JSON object as the last line (the lines to "
                     "stderr): shape, runs (method, profile, kernels, compile_s, seconds), cache (path, files, "
@@ -138,7 +140,8 @@ def warm_one(spec, profile: str, shape, n_frames: int) -> float:
 
 
 def cmd_warmup(args) -> int:
-    """Warm each planned run, end the runtime so the offline cache is written, and report what was built."""
+    """Warm each planned run in a fresh runtime, ended after it so that the offline cache is written; report
+    what each built and the files the cache gained."""
     from . import backend
 
     shape = validate.frame_shape("--shape", args.shape)
@@ -147,14 +150,16 @@ def cmd_warmup(args) -> int:
     files_before = compile_stats.cache_file_count(cache)
     runs = []
     for spec, label, profile in args.checked:
+        backend.shutdown()  # a fresh runtime for each run, as a `track` process has
+        backend.init(args.arch, threads=args.threads)
         before = compile_stats.compile_totals()
         seconds = warm_one(spec, profile, shape, args.frames)
         built = compile_stats.compile_totals().since(before)
+        backend.shutdown()  # Taichi writes the offline cache when its runtime ends
         say(f"warmup {spec.name} ({label}, {shape[0]}x{shape[1]}): {built.kernels} kernel(s) built in "
             f"{built.seconds:.1f} s")
         runs.append({"method": spec.name, "profile": label, "kernels": built.kernels,
                      "compile_s": round(built.seconds, 3), "seconds": round(seconds, 3)})
-    backend.shutdown()  # Taichi writes the offline cache when its runtime ends
     files = compile_stats.cache_file_count(cache)
     say(f"offline cache: {cache or 'none'}, {files} files (+{files - files_before} new)")
     if args.json:
