@@ -415,6 +415,21 @@ def test_rows_stream_out_at_the_confirmation_and_online_paths_follow():
     np.testing.assert_array_equal(online, tracks[tracks["frame"] >= first])
 
 
+def test_summaries_do_not_pile_up_after_the_windows():
+    """Once Alg. 5 is over only the current frame's summary is kept (an endless stream does not grow by G × 8
+    values a frame), and the rows are those of a tracker fed the same frames (the summaries read then)."""
+    scene = simulate_guler2016("S2", 1, 30, seed=0, frames=80)
+    tracker = make_tracker("tophat-pf", scene.frames.shape[1:], seed=0)
+    lengths = []
+    for frame in scene.frames:
+        tracker.update(frame)
+        lengths.append(len(tracker.summaries))
+    assert not tracker.windows_on and lengths[-1] == 1 and max(lengths) <= 28  # 3 windows at most: frames 3–27
+    tracks = tracker.finish()
+    np.testing.assert_array_equal(tracks["frame"], np.arange(3, 80))
+    assert np.all(errors(tracks, scene.truth) < 2.0)
+
+
 def test_report_two_gives_two_tracks():
     """report = 2: the confirmed filter's rows (as report = 1's: each filter's particles depend on its own random
     keys only; the confidence may differ, as the windows go on) and a second track, both from frame 3."""

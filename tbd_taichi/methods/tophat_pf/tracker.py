@@ -58,7 +58,8 @@ class TophatPFTracker(OneSequence):
         self.first: list[np.ndarray] = []
         self.candidates = np.zeros((0, 3))
         self.alive = np.zeros(groups, bool)
-        self.summaries: list[np.ndarray] = []  # per frame from 3: (G, SUMMARY)
+        self.summaries: list[np.ndarray] = []  # per frame from summary_base: (G, SUMMARY)
+        self.summary_base = FIRST_FRAMES  # the frame of summaries[0]
         self.window = (0, *window_of(self.lengths, 0, FIRST_FRAMES))  # (index, first, last)
         self.windows_on = True
         self.cost = np.zeros(groups)
@@ -131,6 +132,9 @@ class TophatPFTracker(OneSequence):
         motion = learnt and self.frame > end_1 and self.p.weighting == "combined"  # Eq. 3.16 once B is there
         self.k.step(self.frame, since, int(learnt), int(motion))
         self.summaries.append(backend.to_host(self.k.summary))
+        if not self.windows_on:  # Alg. 5 is over: only this frame's summary is read (its rows), so none piles up
+            del self.summaries[:-1]
+            self.summary_base = self.frame
         t1 = time.perf_counter()
         self.seconds["particles"] += t1 - t0
         out = []
@@ -150,7 +154,7 @@ class TophatPFTracker(OneSequence):
         """Alg. 5 at the end of a window: J, the merge, the elimination while > 2 remain, the confirmation (at the
         end of window 3, or once ≤ 2 remain), and the next window while > 2 remain."""
         index, first, last = self.window
-        path = np.stack([s[:, [SUM_X, SUM_Y]] for s in self.summaries[first - FIRST_FRAMES:]])
+        path = np.stack([s[:, [SUM_X, SUM_Y]] for s in self.summaries[first - self.summary_base:]])
         self.cost = trajectory_cost(path.astype(np.float64), self.p.epsilon)
         evidence = self._evidence()
         before = self.alive.copy()
@@ -185,7 +189,7 @@ class TophatPFTracker(OneSequence):
                              float(evidence[g]), action))
 
     def _row(self, frame: int, g: int) -> tuple:
-        s = self.summaries[frame - FIRST_FRAMES][g]
+        s = self.summaries[frame - self.summary_base][g]
         return (frame, g + 1, float(s[SUM_X]), float(s[SUM_Y]), float(s[SUM_BX]), float(s[SUM_BY]), float(s[SUM_S]),
                 float(np.clip(1.0 - self.cost[g] / 2.0, 0.0, 1.0)))
 
