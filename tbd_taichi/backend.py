@@ -321,12 +321,12 @@ BATCH_DTYPES = ("f32", "f64", "i32", "u32")  # field dtypes a batch write holds 
 def _batchable(field) -> bool:
     from taichi.lang.field import ScalarField
 
-    return isinstance(field, ScalarField) and str(field.dtype) in BATCH_DTYPES
+    return isinstance(field, ScalarField) and str(field.dtype) in BATCH_DTYPES and len(field.shape) in (1, 2)
 
 
 def from_host_many(target, arrays: dict) -> None:
     """``target.name`` ← ``arrays[name]`` for each name (converted to the attribute's dtype and shape): NumPy
-    attributes by assignment; Taichi scalar fields of f32, f64, i32 or u32 by one kernel for all of them
+    attributes by assignment; 1-D and 2-D Taichi scalar fields of f32, f64, i32 or u32 by one kernel for all of them
     (``kernels.transfer.arrays_to_fields``: a setup writing twenty fields compiles one kernel, not twenty);
     other fields by :func:`from_host`."""
     batch, parts = [], []
@@ -348,15 +348,17 @@ def from_host_many(target, arrays: dict) -> None:
 
 
 def zero_many(target, names) -> None:
-    """``target.name`` ← 0 for each name: NumPy attributes in place, Taichi fields by one kernel
-    (``kernels.transfer.zero_fields``)."""
+    """``target.name`` ← 0 for each name: NumPy attributes in place, 1-D and 2-D scalar Taichi fields of the batched
+    dtypes by one kernel (``kernels.transfer.zero_fields``), others by ``fill``."""
     fields = []
     for name in names:
         field = getattr(target, name)
         if isinstance(field, np.ndarray):
             field[...] = 0
-        else:
+        elif _batchable(field):
             fields.append(field)
+        else:
+            field.fill(0)
     if fields:
         from .kernels.transfer import zero_fields
 
