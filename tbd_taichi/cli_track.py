@@ -18,6 +18,7 @@ from .methods.sgds.params import PAPER_SALIENCY
 from .profiles import PROFILES, describe, profile_settings, resolved_profile
 
 IMPORTED_AT = time.monotonic()
+COMPILE_NOTE_S = 10.0  # a run that compiled longer than this says how to avoid it
 FLAG_NAMES = {"snr": "--snr", "particles": "--particles", "threshold": "--threshold", "min_peak_z": "--min-peak-z"}
 FRONTEND_PROCESS_HELP = ("run normalisation and saliency in a second process, one frame ahead of the particle "
                          "filters (a second CPU core; the same tracks, online rows one frame later)")
@@ -299,6 +300,15 @@ class RunTiming:
                 "steady_fps": self.steady_fps, "wall_s": wall_s,
                 "end_to_end_fps": self.frames / wall_s if wall_s > 0 else float("nan")}
 
+    def compile_note(self, shape) -> str | None:
+        """A hint after a run that spent over COMPILE_NOTE_S building kernels (a frame size or method not seen before
+        on this machine): later runs load them from the cache, and ``warmup`` can build them ahead of time."""
+        if self.compiled.seconds <= COMPILE_NOTE_S:
+            return None
+        return (f"note: {self.compiled.seconds:.0f} s went to compiling kernels for {shape[0]}x{shape[1]} frames; "
+                "later runs at this size load them from Taichi's offline cache (tbd-taichi warmup --shape "
+                f"{shape[0]} {shape[1]} builds them ahead of time)")
+
     def line(self, wall_s: float) -> str:
         """The timing line ``track`` prints."""
         c = self.compiled
@@ -387,6 +397,9 @@ def cmd_track(args) -> int:
     summary = dict(method=args.method, input=str(args.input), out=str(plan.out), frames=frames, tracks=n_tracks,
                    rows=int(len(tracks)), **timing.summary(wall), profile=plan.profile, profile_reason=plan.why)
     say(timing.line(wall))
+    note = timing.compile_note(plan.source.shape)
+    if note:
+        say(note, err=True)
     say(f"{args.method}: {frames} frames, {n_tracks} track(s) ({len(tracks)} rows) -> {plan.out}; tracker "
         f"{summary['tracker_fps']:.1f} frames/s, wall {wall:.1f} s with start-up; profile {plan.profile}")
     if args.json:

@@ -109,6 +109,17 @@ def test_track_summarises_the_run_and_scores_box_truth(clip, capsys):
     assert out[-1].startswith("pf: 40 frames,") and "frames/s" in out[-1] and out[-1].endswith("profile paper")
 
 
+def test_a_long_compile_gets_a_note_naming_warmup():
+    from tbd_taichi.cli_track import COMPILE_NOTE_S, RunTiming
+    from tbd_taichi.compile_stats import CompileCounts
+
+    quick = RunTiming(10, 1.0, CompileCounts(5, 1.0, 5, COMPILE_NOTE_S - 1.5), 2.0, 1.0)
+    slow = RunTiming(10, 1.0, CompileCounts(40, 2.0, 40, COMPILE_NOTE_S), 20.0, 11.0)
+    assert quick.compile_note((64, 80)) is None
+    assert "tbd-taichi warmup --shape 64 80" in slow.compile_note((64, 80))
+    assert slow.steady_fps == pytest.approx(10 / 9.0) and "12 s went to compiling" in slow.compile_note((64, 80))
+
+
 def test_evaluate_scores_box_truth_and_its_margin(clip, capsys):
     boxes = tables.read_boxes(clip / "boxes.csv")
     centre = [(b["frame"], 1, b["x"] + b["w"] / 2, b["y"] + b["h"] / 2, 0, 0, 1, 1) for b in boxes]
