@@ -160,6 +160,7 @@ def cmd_warmup(args) -> int:
             f"{built.seconds:.1f} s")
         runs.append({"method": spec.name, "profile": label, "kernels": built.kernels,
                      "compile_s": round(built.seconds, 3), "seconds": round(seconds, 3)})
+    backend.init(args.arch, threads=args.threads)  # the runtime the command started with, for callers in-process
     files = compile_stats.cache_file_count(cache)
     say(f"offline cache: {cache or 'none'}, {files} files (+{files - files_before} new)")
     if args.json:

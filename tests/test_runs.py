@@ -183,7 +183,7 @@ def test_the_plot_legend_names_the_longest_tracks_only(tmp_path, monkeypatch):
 
 
 README = Path(__file__).parent.parent / "README.md"
-CHECKED_ONLY = ("evaluate-suite", "bench")  # minutes of work each: their arguments are checked, not run
+CHECKED_ONLY = ("evaluate-suite", "bench", "warmup")  # long work (tests/test_warmup.py runs warmup): checked, not run
 
 
 def readme_commands() -> list[list[str]]:
@@ -198,7 +198,8 @@ def readme_commands() -> list[list[str]]:
 
 def test_the_readme_examples_work_as_written(tmp_path, monkeypatch, capsys):
     """Each example in order, in a fresh folder with tests/data beside it; the drone clip's tracks are scored
-    against its labels (the PF baseline example once gave a false track), the suite and the bench are checked."""
+    against its labels (the PF baseline example once gave a false track), the suite, the bench and the warm-up are
+    checked."""
     commands = readme_commands()
     assert len(commands) >= 8 and any(c[0] == "track" and "tests/data/IR_DRONE_021.mp4" in c for c in commands)
     (tmp_path / "tests").mkdir()

@@ -36,9 +36,9 @@ def warmed():
     return code, running, out.getvalue(), err.getvalue()
 
 
-def test_warmup_reports_each_profile_and_the_cache_and_ends_the_runtime(warmed):
+def test_warmup_reports_each_profile_and_the_cache_and_leaves_a_runtime(warmed):
     code, running, out, err = warmed
-    assert code == 0 and not running  # the runtime was ended, so the offline cache is written
+    assert code == 0 and running  # each run's runtime was ended (the cache written); an in-process caller gets one back
     result = last_json(out)
     assert result["shape"] == [40, 48]
     assert [(r["method"], r["profile"]) for r in result["runs"]] == [("pf", "paper"), ("pf", "real-video")]
