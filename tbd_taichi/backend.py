@@ -102,7 +102,7 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
     if wanted == _current:
         return _current
     if _current is not None:
-        ti.reset()
+        shutdown()
     kwargs = dict(arch=_ti_arch(name), debug=bool(debug), offline_cache=True,
                   offline_cache_max_size_of_files=OFFLINE_CACHE_BYTES,
                   log_level=ti.WARN, enable_fallback=False, default_fp=ti.f32, default_ip=ti.i32,
@@ -125,13 +125,12 @@ def init(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> 
 
 
 def shutdown() -> None:
-    """End the Taichi runtime (``ti.reset``: Taichi writes its offline cache then); the next :func:`init` starts a
-    new one, and fields made before belong to the old runtime (see :func:`generation`)."""
-    global _current, _generation
+    """End the Taichi runtime (``ti.reset``: Taichi writes its offline cache then) and drop its spare fields; the
+    next :func:`init` starts a new one (a new :func:`generation`: fields made before belong to the old runtime)."""
+    global _current
     ti.reset()
     _current = None
     _pinned.clear()
-    _generation += 1
     _spare.clear()
 
 
@@ -321,12 +320,12 @@ BATCH_DTYPES = ("f32", "f64", "i32", "u32")  # field dtypes a batch write holds 
 def _batchable(field) -> bool:
     from taichi.lang.field import ScalarField
 
-    return isinstance(field, ScalarField) and str(field.dtype) in BATCH_DTYPES and len(field.shape) in (1, 2)
+    return isinstance(field, ScalarField) and str(field.dtype) in BATCH_DTYPES
 
 
 def from_host_many(target, arrays: dict) -> None:
     """``target.name`` ← ``arrays[name]`` for each name (converted to the attribute's dtype and shape): NumPy
-    attributes by assignment; 1-D and 2-D Taichi scalar fields of f32, f64, i32 or u32 by one kernel for all of them
+    attributes by assignment; Taichi scalar fields of f32, f64, i32 or u32 by one kernel for all of them
     (``kernels.transfer.arrays_to_fields``: a setup writing twenty fields compiles one kernel, not twenty);
     other fields by :func:`from_host`."""
     batch, parts = [], []
@@ -348,17 +347,15 @@ def from_host_many(target, arrays: dict) -> None:
 
 
 def zero_many(target, names) -> None:
-    """``target.name`` ← 0 for each name: NumPy attributes in place, 1-D and 2-D scalar Taichi fields of the batched
-    dtypes by one kernel (``kernels.transfer.zero_fields``), others by ``fill``."""
+    """``target.name`` ← 0 for each name: NumPy attributes in place, Taichi fields (scalar or vector, any dtype: 0
+    is exact in each) by one kernel (``kernels.transfer.zero_fields``)."""
     fields = []
     for name in names:
         field = getattr(target, name)
         if isinstance(field, np.ndarray):
             field[...] = 0
-        elif _batchable(field):
-            fields.append(field)
         else:
-            field.fill(0)
+            fields.append(field)
     if fields:
         from .kernels.transfer import zero_fields
 

@@ -274,6 +274,11 @@ def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, Ru
     return final, frames, timing, max_projection
 
 
+def rate(frames: int, seconds: float) -> float:
+    """Frames per second (NaN for no time)."""
+    return frames / seconds if seconds > 0 else float("nan")
+
+
 @dataclass(frozen=True)
 class RunTiming:
     """Where a ``track`` run's time went: ``startup_s`` from the process start to the first frame's update
@@ -290,15 +295,13 @@ class RunTiming:
     @property
     def steady_fps(self) -> float:
         """Frames per second of the tracker without building kernels."""
-        steady = self.busy_s - self.compile_in_updates_s
-        return self.frames / steady if steady > 0 else float("nan")
+        return rate(self.frames, self.busy_s - self.compile_in_updates_s)
 
     def summary(self, wall_s: float) -> dict:
         """The JSON fields: start-up, compile, tracker and end-to-end rates."""
         return {"startup_s": round(self.startup_s, 3), **self.compiled.as_dict(),
-                "tracker_fps": self.frames / self.busy_s if self.busy_s > 0 else float("nan"),
-                "steady_fps": self.steady_fps, "wall_s": wall_s,
-                "end_to_end_fps": self.frames / wall_s if wall_s > 0 else float("nan")}
+                "tracker_fps": rate(self.frames, self.busy_s), "steady_fps": self.steady_fps, "wall_s": wall_s,
+                "end_to_end_fps": rate(self.frames, wall_s)}
 
     def compile_note(self, shape) -> str | None:
         """A hint after a run that spent over COMPILE_NOTE_S building kernels (a frame size or method not seen before
@@ -315,7 +318,7 @@ class RunTiming:
         return (f"timing: start-up {self.startup_s:.1f} s; {c.kernels} kernel(s) built in {c.seconds:.1f} s "
                 f"(front end {c.front_end_s:.1f} s, machine code or cache {c.first_launch_s:.1f} s); tracker "
                 f"{self.steady_fps:.0f} frames/s without them; end to end {wall_s:.1f} s "
-                f"({self.frames / wall_s if wall_s > 0 else float('nan'):.1f} frames/s)")
+                f"({rate(self.frames, wall_s):.1f} frames/s)")
 
 
 def box_centres(boxes: np.ndarray) -> np.ndarray:

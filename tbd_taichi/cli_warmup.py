@@ -71,9 +71,9 @@ def profile_runs(spec, requested: str) -> list[tuple[str, str]]:
     return [(p, p) for p in (("paper", "real-video") if requested == "both" else (requested,))]
 
 
-def check_warmup(args) -> list[tuple]:
+def check_warmup(args) -> tuple[tuple, list[tuple]]:
     """Every argument before any work: the methods, the shape, --frames against each method's minimum, the
-    memory of the frames and of each tracker.  The runs: [(spec, label, profile)]."""
+    memory of the frames and of each tracker.  (The shape, the runs: [(spec, label, profile)])."""
     from .simulate import check_memory
 
     shape = validate.frame_shape("--shape", args.shape)
@@ -87,7 +87,7 @@ def check_warmup(args) -> list[tuple]:
             methods.checked_settings(spec, shape, profile_settings(spec, profile))
             runs.append((spec, label, profile))
     check_memory(shape, args.frames)
-    return runs
+    return shape, runs
 
 
 def warmup_sequence(spec, shape, n_frames: int) -> tuple[np.ndarray, tuple | None]:
@@ -144,12 +144,12 @@ def cmd_warmup(args) -> int:
     what each built and the files the cache gained."""
     from . import backend
 
-    shape = validate.frame_shape("--shape", args.shape)
+    shape, planned = args.checked
     say = (lambda line: print(line, file=sys.stderr, flush=True)) if args.json else print
     cache = compile_stats.cache_directory()
     files_before = compile_stats.cache_file_count(cache)
     runs = []
-    for spec, label, profile in args.checked:
+    for spec, label, profile in planned:
         backend.shutdown()  # a fresh runtime for each run, as a `track` process has
         backend.init(args.arch, threads=args.threads)
         before = compile_stats.compile_totals()
