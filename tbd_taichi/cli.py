@@ -16,6 +16,7 @@ from .cli_simulate import add_simulate_parser
 from .cli_track import FRONTEND_PROCESS_HELP, add_track_parser, format_scores
 from .cli_warmup import add_warmup_parser
 from .errors import TBDError
+from .executor import SCHEDULER_HELP, check_scheduler
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
              "(a GPU if there is one, else the CPU)")
@@ -124,6 +125,9 @@ def check_evaluate_suite(args) -> dict:
         raise TBDError("--compare-runs applies to --scenario guler2016")
     if args.scenario == "jia2022" and scenarios != {"jia2022"}:
         raise TBDError(f"--methods {args.methods} is evaluated on --scenario {scenarios.pop()}; give it")
+    if args.scheduler is not None and args.scenario != "jia2022":
+        raise TBDError(f"--scheduler applies to --scenario jia2022; the {args.scenario} scenario runs in this process")
+    scheduler = check_scheduler(args.scheduler)
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
     sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
     if args.tests is not None:
@@ -139,7 +143,7 @@ def check_evaluate_suite(args) -> dict:
         raise TBDError(f"--out-dir {out_dir}: is a file; give a folder")
     validate.output_path("--out-dir", out_dir / "suite_runs.jsonl") if out_dir.is_dir() else \
         validate.output_path("--out-dir", out_dir)  # a new folder: its parent must exist and be writable
-    return dict(chosen=chosen, snrs=snrs, sizes=sizes, tests=tests, out_dir=out_dir)
+    return dict(chosen=chosen, snrs=snrs, sizes=sizes, tests=tests, out_dir=out_dir, scheduler=scheduler)
 
 
 def cmd_evaluate_suite(args) -> int:
@@ -158,10 +162,11 @@ def cmd_evaluate_suite(args) -> int:
     runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
     out_dir.mkdir(exist_ok=True)
     workers = args.workers or os.cpu_count() or 1
+    where = plan["scheduler"] or f"{workers} worker(s)"
     print(f"{len(runs)} runs ({len(chosen)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
-          f"{workers} worker(s) -> {out_dir}")
+          f"{where} -> {out_dir}")
     results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
-                                       progress=not args.no_progress)
+                                       progress=not args.no_progress, scheduler=plan["scheduler"])
     command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
                f"--size {args.size} --methods {','.join(chosen)} --seed {args.seed} "
                + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "") + f"--out-dir {out_dir}")
@@ -313,7 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--seed", type=number(whole, 0), default=0, help="test k simulates scenario seed SEED+k (default 0)")
     es.add_argument("--tracker-snr", type=number(positive), default=None,
                     help="give every tracker this snr preset (default: the condition's SNR, as in the paper)")
-    es.add_argument("--workers", type=number(whole, 1), default=None, help="parallel processes (default: the core count)")
+    es.add_argument("--workers", type=number(whole, 1), default=None,
+                    help="parallel processes, here or in --scheduler local-dask (default: the core count)")
+    es.add_argument("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)
     es.add_argument("--out-dir", "--out", dest="out_dir", default=None,
                     help="where the table, JSON, figures and runs go (made if its parent exists; default "
                          "suite-results, guler2016: docs/results/guler2016)")

@@ -4,14 +4,29 @@ from __future__ import annotations
 import contextlib
 
 
-def progress_bar(label: str, enabled: bool, transient: bool = False):
-    """A ``rich.progress.Progress`` context with ``label``, a bar, done/total and time left;
-    a no-op context yielding None when disabled."""
+def progress_bar(label: str, enabled: bool, transient: bool = False, rate_unit: str | None = None):
+    """A ``rich.progress.Progress`` context with ``label``, a bar, done/total, the rate in ``rate_unit`` per
+    minute (if given) and time left; a no-op context yielding None when disabled."""
     if not enabled:
         return contextlib.nullcontext(None)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), transient=transient)
+    rate = [_per_minute_column(rate_unit)] if rate_unit else []
+    return Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), *rate, TimeRemainingColumn(),
+                    transient=transient)
+
+
+def _per_minute_column(unit: str):
+    """A rich column showing the task's speed as ``unit``/min (blank until rich has measured one)."""
+    from rich.progress import ProgressColumn
+    from rich.text import Text
+
+    class PerMinute(ProgressColumn):
+        def render(self, task) -> Text:
+            speed = task.finished_speed or task.speed
+            return Text("" if speed is None else f"{speed * 60:.1f} {unit}/min")
+
+    return PerMinute()
 
 
 PLAIN_EVERY = 5.0  # s between plain progress lines

@@ -22,6 +22,7 @@ import numpy as np
 
 from . import metrics
 from .bench import machine_description
+from .errors import TBDError
 from .progress import progress_bar
 
 SNRS = (1.2, 1.4, 1.6, 1.8, 2.0)
@@ -91,22 +92,6 @@ def run_one(run: Run) -> dict:
                 machine=machine_description())
 
 
-def _init_worker(arch: str, threads: int | None) -> None:
-    from . import backend
-
-    backend.keep_freed_memory()
-    backend.init(arch, threads=threads)
-
-
-def _init_pool_worker(arch: str, threads: int | None) -> None:
-    """A pool worker ignores SIGINT: Ctrl-C reaches the whole process group, and the parent
-    alone decides to stop (it keeps the finished runs and terminates the pool)."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _init_worker(arch, threads)
-
-
 def load_runs(path: Path) -> dict[str, dict]:
     """Finished runs in a JSON-lines file, by key (a torn last line is ignored)."""
     done = {}
@@ -121,36 +106,30 @@ def load_runs(path: Path) -> dict[str, dict]:
 
 
 def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu", threads: int | None = None,
-            progress: bool = True) -> tuple[list[dict], bool]:
+            progress: bool = True, scheduler: str | None = None) -> tuple[list[dict], bool]:
     """Run what ``runs_file`` lacks, appending each result as it finishes; returns (all results of
-    ``runs``, completed).  Ctrl-C stops the workers and keeps the finished results."""
+    ``runs``, completed).  ``workers``, ``threads`` and ``scheduler`` choose where (:class:`.executor.Fanout`).
+    Ctrl-C stops the workers and keeps the finished results; a run that fails raises a TBDError naming it
+    (the runs finished before it are kept)."""
+    from .executor import Fanout
+
     done = load_runs(runs_file)
     todo = [r for r in runs if r.key not in done]
     completed = True
     runs_file.parent.mkdir(parents=True, exist_ok=True)
-    with open(runs_file, "a") as out, progress_bar("evaluation runs", progress) as bar:
+    with open(runs_file, "a") as out, progress_bar("evaluation runs", progress, rate_unit="runs") as bar, \
+            Fanout(workers, arch, threads, scheduler) as fanout:
         task = bar.add_task("runs", total=len(runs), completed=len(runs) - len(todo)) if bar is not None else None
-
-        def keep(row: dict) -> None:
-            row["workers"] = workers
-            done[row["key"]] = row
-            out.write(json.dumps(row) + "\n")
-            out.flush()
-            if bar is not None:
-                bar.advance(task)
-
         try:
-            if workers <= 1:
-                _init_worker(arch, threads)
-                for run in todo:
-                    keep(run_one(run))
-            elif todo:
-                import multiprocessing
-
-                ctx = multiprocessing.get_context("spawn")  # each worker starts its own Taichi runtime
-                with ctx.Pool(workers, initializer=_init_pool_worker, initargs=(arch, threads or 1)) as pool:
-                    for row in pool.imap_unordered(run_one, todo):
-                        keep(row)
+            for outcome in fanout.run(run_one, todo):
+                if outcome.error:
+                    raise TBDError(f"run {outcome.item.key}: {outcome.error}")
+                row = dict(outcome.value, workers=fanout.label)
+                done[row["key"]] = row
+                out.write(json.dumps(row) + "\n")
+                out.flush()
+                if bar is not None:
+                    bar.advance(task)
         except KeyboardInterrupt:
             completed = False
     return [done[r.key] for r in runs if r.key in done], completed
