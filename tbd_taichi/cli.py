@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import backend, compile_stats, methods, metrics, tables, validate
+from .cli_batch import add_batch_parser
 from .cli_simulate import add_simulate_parser
 from .cli_track import FRONTEND_PROCESS_HELP, add_track_parser, format_scores
 from .cli_warmup import add_warmup_parser
@@ -357,6 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     _common(be)
     be.set_defaults(func=cmd_bench, check=check_bench)
 
+    add_batch_parser(sub, _common)
     add_warmup_parser(sub, _common)
     return parser
 

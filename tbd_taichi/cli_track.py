@@ -363,8 +363,6 @@ def format_scores(scores: dict) -> str:
 
 
 def cmd_track(args) -> int:
-    from . import io
-
     plan = args.checked
     if plan is None:
         print(methods.get(args.method).help_text())
@@ -372,6 +370,17 @@ def cmd_track(args) -> int:
 
     def say(text: str, err: bool = False) -> None:
         print(text, file=sys.stderr if (err or args.json) else sys.stdout, flush=True)
+
+    summary = execute_track(plan, args, say)
+    if args.json:
+        print(json.dumps(summary, allow_nan=True, default=_jsonable))
+    return 0
+
+
+def execute_track(plan: TrackPlan, args, say) -> dict:
+    """Track, score, plot and write what ``plan`` asks; ``say(text, err=False)`` gets the lines ``track``
+    prints.  Returns the run summary (frames, tracks, rows, timing, profile, scores)."""
+    from . import io
 
     say(describe(plan.profile, plan.why, profile_settings(plan.spec, plan.profile), plan.given))
     with tables.CsvTableWriter(plan.out, plan.columns) as writer:
@@ -405,9 +414,7 @@ def cmd_track(args) -> int:
         say(note, err=True)
     say(f"{args.method}: {frames} frames, {n_tracks} track(s) ({len(tracks)} rows) -> {plan.out}; tracker "
         f"{summary['tracker_fps']:.1f} frames/s, wall {wall:.1f} s with start-up; profile {plan.profile}")
-    if args.json:
-        print(json.dumps({**summary, "scores": scores}, allow_nan=True, default=_jsonable))
-    return 0
+    return {**summary, "scores": scores}
 
 
 def _jsonable(value):
@@ -418,5 +425,5 @@ def _jsonable(value):
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
-__all__ = ["add_track_parser", "cmd_track", "flag_settings", "format_scores", "parse_init_box", "plan_track",
+__all__ = ["add_track_parser", "cmd_track", "execute_track", "flag_settings", "format_scores", "parse_init_box", "plan_track",
            "requested_profile"]
