@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 
 import distributed
 
 from .errors import TBDError
-from .executor import LOCAL_DASK, Outcome, ensure_backend, guarded
+from .executor import LOCAL_DASK, Outcome, ensure_backend, guarded, stop_backend
 
 CONNECT_TIMEOUT_S = 20
 
@@ -25,9 +26,14 @@ def _start_quietly(arch: str, threads: int | None) -> None:
         pass  # kept by ensure_backend: each item then fails with it
 
 
+_ONE_AT_A_TIME = threading.Lock()  # a worker started with --nthreads > 1 still runs one item at a time
+
+
 def _run_item(item, fn, arch: str, threads: int | None) -> Outcome:
-    """:func:`.executor.guarded` with the item first, as ``Client.map`` passes it."""
-    return guarded(fn, item, arch, threads)
+    """:func:`.executor.guarded` with the item first, as ``Client.map`` passes it; one item at a time per worker
+    process (Taichi's runtime is one per process, and its launches are not meant for concurrent threads)."""
+    with _ONE_AT_A_TIME:
+        return guarded(fn, item, arch, threads)
 
 
 class TaichiWorkerSetup(distributed.WorkerPlugin):
@@ -44,6 +50,13 @@ class TaichiWorkerSetup(distributed.WorkerPlugin):
         if pool is None:  # pragma: no cover - another distributed layout: the first item starts it
             return
         await asyncio.get_running_loop().run_in_executor(pool, _start_quietly, self.arch, self.threads)
+
+    def teardown(self, worker) -> None:
+        """A worker that closes normally saves the kernels it compiled to Taichi's offline cache."""
+        try:
+            stop_backend()
+        except Exception:  # pragma: no cover - closing anyway
+            pass
 
 
 class DaskCluster:

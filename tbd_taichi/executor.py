@@ -9,6 +9,7 @@ is given, so the default needs no extra package.
 """
 from __future__ import annotations
 
+import importlib.util
 import re
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator
@@ -30,10 +31,11 @@ def check_scheduler(value: str | None) -> str | None:
     if value != LOCAL_DASK and not _ADDRESS.match(value):
         raise TBDError(f"--scheduler {value!r}: give tcp://HOST:PORT (a running `dask scheduler`) or {LOCAL_DASK}")
     try:
-        import distributed  # noqa: F401
-    except ImportError:
-        raise TBDError(f"--scheduler {value} needs Dask's distributed package: pip install 'tbd-taichi[cluster]'") \
-            from None
+        found = importlib.util.find_spec("distributed") is not None
+    except (ImportError, ValueError):  # a broken or blocked install
+        found = False
+    if not found:
+        raise TBDError(f"--scheduler {value} needs Dask's distributed package: pip install 'tbd-taichi[cluster]'")
     return value
 
 
@@ -91,7 +93,20 @@ def _pool_initializer(arch: str, threads: int | None) -> None:
     try:
         ensure_backend(arch, threads)
     except BackendError:
-        pass  # kept: each item reports it
+        return  # kept: each item reports it
+    from multiprocessing.util import Finalize
+
+    Finalize(None, stop_backend, exitpriority=10)  # at a normal exit (the pool closed, not terminated)
+
+
+def stop_backend() -> None:
+    """End this worker's Taichi runtime; Taichi then writes the kernels it compiled to its offline cache, so the
+    next worker on this machine loads them instead of compiling them again."""
+    if _BACKEND.get("key") and not _BACKEND.get("error"):
+        from . import backend
+
+        backend.shutdown()
+        _BACKEND.clear()
 
 
 def _pool_call(job: tuple) -> Outcome:
@@ -148,9 +163,16 @@ class Fanout:
             import multiprocessing
 
             ctx = multiprocessing.get_context("spawn")  # each worker starts its own Taichi runtime
-            with ctx.Pool(min(self.workers, len(items)), initializer=_pool_initializer,
-                          initargs=(self.arch, self.threads)) as pool:
+            pool = ctx.Pool(min(self.workers, len(items)), initializer=_pool_initializer,
+                            initargs=(self.arch, self.threads))
+            try:
                 yield from pool.imap_unordered(_pool_call, [(fn, item, self.arch, self.threads) for item in items])
+                pool.close()  # the workers end normally and save their compiled kernels
+            except BaseException:  # Ctrl-C, an error, or the caller stopped early: stop the workers now
+                pool.terminate()
+                raise
+            finally:
+                pool.join()
 
 
-__all__ = ["LOCAL_DASK", "SCHEDULER_HELP", "Fanout", "Outcome", "check_scheduler", "ensure_backend", "guarded"]
+__all__ = ["LOCAL_DASK", "SCHEDULER_HELP", "Fanout", "Outcome", "check_scheduler", "ensure_backend", "guarded", "stop_backend"]

@@ -141,3 +141,15 @@ def test_a_worker_without_its_backend_fails_its_items_fast():
 
 def _inverse(x):
     return 1 / x
+
+
+def test_progress_shows_the_rate_per_minute():
+    from tbd_taichi.progress import progress_bar
+
+    bar = progress_bar("evaluation runs", True, rate_unit="runs")
+    column = next(c for c in bar.columns if type(c).__name__ == "PerMinute")
+    task_id = bar.add_task("runs", total=10)
+    task = bar.tasks[task_id]
+    assert str(column.render(task)) == ""  # nothing measured yet
+    task.finished_speed = 0.5  # rich's measured rate, per second
+    assert str(column.render(task)) == "30.0 runs/min"

@@ -183,7 +183,8 @@ def test_the_plot_legend_names_the_longest_tracks_only(tmp_path, monkeypatch):
 
 
 README = Path(__file__).parent.parent / "README.md"
-CHECKED_ONLY = ("evaluate-suite", "bench", "warmup")  # long work (tests/test_warmup.py runs warmup): checked, not run
+CHECKED_ONLY = ("evaluate-suite", "bench", "warmup", "batch-track")  # long work (test_warmup, test_batch and
+# test_cluster run warmup and batch-track): checked, not run
 
 
 def readme_commands() -> list[list[str]]:
