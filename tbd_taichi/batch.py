@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import csv
 import glob
+import json
 import os
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +20,8 @@ from . import io
 from .errors import TBDError
 
 SUMMARY = "summary.csv"
+SETTINGS = "batch_settings.json"  # the settings the outputs in the folder were made with
+PARTIAL = ".partial"  # in a temporary output's name
 SUMMARY_COLUMNS = ("input", "name", "frames", "tracks", "tracker_fps", "wall_s", "status", "error")
 EXTRAS = {"video": ".mp4", "plot": ".png"}  # optional outputs beside each tracks CSV
 SEQUENCE_SUFFIXES = io.VIDEO_SUFFIXES + io.ARRAY_SUFFIXES
@@ -69,16 +73,24 @@ def expand_inputs(patterns) -> list[Path]:
 
 
 def output_names(paths: list[Path]) -> list[str]:
-    """Each input's output name: its file stem (a folder's name); where two share one, their paths below the
-    inputs' common folder, with ``__`` for ``/``."""
-    stems = [p.stem if p.is_file() else p.name for p in paths]
-    if len(set(stems)) == len(stems):
-        names = stems
-    else:
-        root = Path(os.path.commonpath([str(p.parent) for p in paths]))
-        names = [str(p.relative_to(root).with_suffix("") if p.is_file() else p.relative_to(root)).replace(os.sep, "__")
-                 for p in paths]
-    if Path(SUMMARY).stem in names:
+    """Each input's output name: its file stem (a folder's name).  Inputs whose names clash (case-folded, as on
+    a case-insensitive filesystem) take their path below the inputs' common folder, with ``__`` for ``/``, and
+    where that still clashes, their suffix too (``clip_npz``); the others keep theirs."""
+    root = Path(os.path.commonpath([str(p.parent) for p in paths])) if paths else Path(".")
+
+    def relative(p: Path, suffix: bool) -> str:
+        rel = p.relative_to(root)
+        text = str(rel if (suffix or not p.is_file()) else rel.with_suffix("")).replace(os.sep, "__")
+        return text.replace(".", "_") if suffix else text
+
+    names = [p.stem if p.is_file() else p.name for p in paths]
+    for rename in (lambda p: relative(p, False), lambda p: relative(p, True)):
+        folded = Counter(n.casefold() for n in names)
+        names = [rename(p) if folded[n.casefold()] > 1 else n for p, n in zip(paths, names)]
+    clashes = [n for n, k in Counter(n.casefold() for n in names).items() if k > 1]
+    if clashes:
+        raise TBDError(f"INPUTS: more than one input would write {clashes[0]}.csv; rename one")
+    if Path(SUMMARY).stem.casefold() in {n.casefold() for n in names}:
         raise TBDError(f"INPUTS: an input named {Path(SUMMARY).stem!r} would overwrite the batch's {SUMMARY}; "
                        "rename it")
     return names
@@ -98,19 +110,43 @@ class BatchItem:
         return all(Path(final).is_file() for _, final in self.outputs)
 
 
-def plan_item(path: Path, name: str, out_dir: Path, track_options: list[str], extras: tuple[str, ...]) -> BatchItem:
-    """The ``track`` run of one input, its outputs under temporary names in ``out_dir``."""
+def plan_item(path: Path, name: str, out_dir: Path, track_options: list[str], extras: tuple[str, ...],
+              tag: str) -> BatchItem:
+    """The ``track`` run of one input, its outputs under temporary names in ``out_dir`` that carry ``tag`` (one
+    per batch command: a run still finishing from an interrupted batch never shares a file with a rerun)."""
     outputs, argv = [], ["track", str(path), "--progress", "off", *track_options]
-    for extra in extras:
-        final = out_dir / f"{name}{EXTRAS[extra]}"
-        temporary = out_dir / f".{name}.partial{EXTRAS[extra]}"
+    for extra, suffix in [(e, EXTRAS[e]) for e in extras] + [("out", ".csv")]:  # the tracks CSV last
+        final = out_dir / f"{name}{suffix}"
+        temporary = out_dir / f".{name}.{tag}{PARTIAL}{suffix}"
         argv += [f"--{extra}", str(temporary)]
         outputs.append((str(temporary), str(final)))
-    final = out_dir / f"{name}.csv"
-    temporary = out_dir / f".{name}.partial.csv"
-    argv += ["--out", str(temporary)]
-    outputs.append((str(temporary), str(final)))
     return BatchItem(str(path), name, tuple(argv), tuple(outputs))
+
+
+def remove_stale_partials(out_dir: Path) -> int:
+    """Delete the temporary outputs that killed or terminated runs left in ``out_dir``; how many."""
+    stale = [p for p in out_dir.glob(f".*{PARTIAL}.*") if p.is_file()] if out_dir.is_dir() else []
+    for path in stale:
+        path.unlink(missing_ok=True)
+    return len(stale)
+
+
+def check_settings(out_dir: Path, settings: dict) -> None:
+    """The batch's settings (method, parameters, profile, seed, engine) are those of the outputs already in
+    ``out_dir`` (recorded in SETTINGS), so a rerun never keeps outputs made otherwise; a TBDError if not."""
+    path = out_dir / SETTINGS
+    try:
+        earlier = json.loads(path.read_text()) if path.is_file() else None
+    except (OSError, ValueError):
+        earlier = None
+    if earlier is not None and earlier != settings:
+        changed = sorted(k for k in set(settings) | set(earlier) if settings.get(k) != earlier.get(k))
+        raise TBDError(f"--out-dir {out_dir} holds outputs made with other settings ({', '.join(changed)}: "
+                       f"{', '.join(str(earlier.get(k)) for k in changed)}); give another folder or empty it")
+
+
+def write_settings(out_dir: Path, settings: dict) -> None:
+    (out_dir / SETTINGS).write_text(json.dumps(settings, indent=1) + "\n")
 
 
 def track_one(item: BatchItem) -> dict:
@@ -150,7 +186,7 @@ def read_summary(out_dir: Path) -> dict[str, dict]:
 
 def write_summary(out_dir: Path, rows: list[dict]) -> Path:
     """``summary.csv``, replaced whole (a temporary file, then a rename)."""
-    path, temporary = out_dir / SUMMARY, out_dir / f".{SUMMARY}.partial"
+    path, temporary = out_dir / SUMMARY, out_dir / f".{SUMMARY}{PARTIAL}"
     with open(temporary, "w", newline="") as handle:
         writer = csv.DictWriter(handle, SUMMARY_COLUMNS, extrasaction="ignore")
         writer.writeheader()
@@ -159,5 +195,5 @@ def write_summary(out_dir: Path, rows: list[dict]) -> Path:
     return path
 
 
-__all__ = ["BatchItem", "SUMMARY", "expand_inputs", "failed_row", "output_names", "plan_item", "read_summary",
-           "track_one", "write_summary"]
+__all__ = ["BatchItem", "SETTINGS", "SUMMARY", "check_settings", "expand_inputs", "failed_row", "output_names",
+           "plan_item", "read_summary", "remove_stale_partials", "track_one", "write_settings", "write_summary"]

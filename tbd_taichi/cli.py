@@ -126,6 +126,8 @@ def check_evaluate_suite(args) -> dict:
         raise TBDError("--compare-runs applies to --scenario guler2016")
     if args.scenario == "jia2022" and scenarios != {"jia2022"}:
         raise TBDError(f"--methods {args.methods} is evaluated on --scenario {scenarios.pop()}; give it")
+    if args.explain and (args.scenario != "jia2022" or "sgds" not in chosen):
+        raise TBDError("--explain applies to --scenario jia2022 with sgds among --methods")
     if args.scheduler is not None and args.scenario != "jia2022":
         raise TBDError(f"--scheduler applies to --scenario jia2022; the {args.scenario} scenario runs in this process")
     scheduler = check_scheduler(args.scheduler)
@@ -160,19 +162,22 @@ def cmd_evaluate_suite(args) -> int:
     if args.scenario == "guler2016":
         return run_guler2016_suite(args, plan["chosen"], plan["tests"], plan["out_dir"])
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
-    runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0)
+    runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0, explain=args.explain)
     out_dir.mkdir(exist_ok=True)
     workers = args.workers or os.cpu_count() or 1
     where = plan["scheduler"] or f"{workers} worker(s)"
     print(f"{len(runs)} runs ({len(chosen)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
           f"{where} -> {out_dir}")
     results, completed = suite.execute(runs, out_dir / "suite_runs.jsonl", workers, args.arch, args.threads,
-                                       progress=not args.no_progress, scheduler=plan["scheduler"])
+                                       progress=not args.no_progress, scheduler=plan["scheduler"],
+                                       say=lambda text: print(text, flush=True))
     command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
                f"--size {args.size} --methods {','.join(chosen)} --seed {args.seed} "
                + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "") + f"--out-dir {out_dir}")
     report = suite.write_report(results, out_dir, command, completed, len(runs))
     print(suite.markdown_table(suite.summarise(results)))
+    if args.explain:
+        print(f"explained: {suite.write_explained(results, out_dir, command + ' --explain')}")
     print(f"report -> {report}" + ("" if completed else " (interrupted; finished runs kept)"))
     return 0 if completed else 130
 
@@ -325,6 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--out-dir", "--out", dest="out_dir", default=None,
                     help="where the table, JSON, figures and runs go (made if its parent exists; default "
                          "suite-results, guler2016: docs/results/guler2016)")
+    es.add_argument("--explain", action="store_true",
+                    help="for each missed or late SGDS-PF run, the stage that lost the target (never a candidate, no "
+                         "potential target, never confirmed, confirmed then dropped, or the slowest step); writes "
+                         "OUT_DIR/explain.md")
     es.add_argument("--no-progress", action="store_true", help="no progress bar")
     _common(es)
     es.set_defaults(func=cmd_evaluate_suite, check=check_evaluate_suite)
@@ -363,6 +372,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def fans_out(args) -> bool:
+    """The command's work runs in worker processes (a pool or a Dask cluster), not in this one."""
+    if getattr(args, "scheduler", None):
+        return True
+    if args.command == "batch-track":
+        return args.workers > 1
+    if args.command == "evaluate-suite" and args.scenario == "jia2022":
+        import os
+
+        return (args.workers or os.cpu_count() or 1) > 1
+    return False
+
+
 def main(argv=None) -> int:
     """Parse, check (before the backend starts), then run one sub-command; a TBDError is one line, exit 2."""
     args = build_parser().parse_args(argv)
@@ -371,7 +393,8 @@ def main(argv=None) -> int:
         args.checked = check(args) if check else None
         backend.keep_freed_memory()
         compile_stats.start_counting()
-        backend.init(args.arch, threads=args.threads)
+        if not fans_out(args):  # workers start their own backend (--arch may name one this machine lacks)
+            backend.init(args.arch, threads=args.threads)
         return args.func(args)
     except TBDError as exc:
         print(f"tbd-taichi {args.command}: error: {exc}", file=sys.stderr)

@@ -3,6 +3,7 @@ Dask cluster, with a summary.csv; a bad input is recorded and the batch goes on 
 from __future__ import annotations
 
 import sys
+import uuid
 from pathlib import Path
 
 from . import batch, methods, validate
@@ -57,11 +58,19 @@ def check_batch_track(args) -> list[batch.BatchItem]:
         raise TBDError(f"--out-dir {out_dir}: is a file; give a folder")
     validate.output_path("--out-dir", out_dir / batch.SUMMARY if out_dir.is_dir() else out_dir)
     paths = batch.expand_inputs(args.inputs)
+    names = batch.output_names(paths)
+    batch.check_settings(out_dir, batch_settings(args))
     options = ["--method", args.method, "--profile", args.profile, "--seed", str(args.seed), "--engine", args.engine]
     options += [item for assignment in args.param for item in ("--param", assignment)]
     extras = tuple(extra for extra in batch.EXTRAS if getattr(args, extra))
-    return [batch.plan_item(path, name, out_dir, options, extras)
-            for path, name in zip(paths, batch.output_names(paths))]
+    tag = uuid.uuid4().hex[:8]
+    return [batch.plan_item(path, name, out_dir, options, extras, tag) for path, name in zip(paths, names)]
+
+
+def batch_settings(args) -> dict:
+    """What the outputs depend on besides the input: a rerun into the same folder must match."""
+    return dict(method=args.method, params=sorted(args.param), profile=args.profile, seed=args.seed,
+                engine=args.engine)
 
 
 def cmd_batch_track(args) -> int:
@@ -70,6 +79,10 @@ def cmd_batch_track(args) -> int:
     items = args.checked
     out_dir = Path(args.out_dir).expanduser()
     out_dir.mkdir(exist_ok=True)
+    batch.write_settings(out_dir, batch_settings(args))
+    stale = batch.remove_stale_partials(out_dir)
+    if stale:
+        print(f"removed {stale} temporary file(s) that an interrupted batch left in {out_dir}")
     earlier = batch.read_summary(out_dir)
     todo = [item for item in items if not item.complete()]
     rows = {item.input: dict(batch.failed_row(item, ""), status="pending") for item in todo}
@@ -95,11 +108,12 @@ def cmd_batch_track(args) -> int:
             except KeyboardInterrupt:
                 completed = False
     summary = batch.write_summary(out_dir, list(rows.values()))
-    print(f"{len(todo) - failed} tracked, {failed} failed, {len(items) - len(todo)} skipped (done earlier); "
+    tracked = sum(rows[item.input]["status"] == "ok" for item in todo)
+    print(f"{tracked} tracked, {failed} failed, {len(items) - len(todo)} skipped (done earlier); "
           f"summary -> {summary}" + ("" if completed else " (interrupted; finished inputs kept)"))
     for row in rows.values():
         if row["status"] == "failed":
-            print(f"  failed: {row['error']}", file=sys.stderr)
+            print(f"  failed: {row['input']}: {row['error']}", file=sys.stderr)
     return 130 if not completed else (1 if failed else 0)
 
 

@@ -8,6 +8,7 @@ comes back as that item's fatal :class:`~.executor.Outcome`).
 from __future__ import annotations
 
 import asyncio
+import atexit
 import logging
 import threading
 
@@ -20,12 +21,19 @@ CONNECT_TIMEOUT_S = 20
 
 
 def _start_quietly(arch: str, threads: int | None) -> None:
+    """Start this worker's backend (kept for each item if it fails); a worker that ends normally then saves
+    the kernels it compiled to Taichi's offline cache (at exit, when no task runs)."""
     try:
-        ensure_backend(arch, threads)
+        with _ONE_AT_A_TIME:  # never under a running item (a plugin registered again by a later command)
+            ensure_backend(arch, threads)
     except TBDError:
-        pass  # kept by ensure_backend: each item then fails with it
+        return  # kept by ensure_backend: each item then fails with it
+    if not _SAVE_AT_EXIT:
+        atexit.register(stop_backend)
+        _SAVE_AT_EXIT.append(True)
 
 
+_SAVE_AT_EXIT: list = []
 _ONE_AT_A_TIME = threading.Lock()  # a worker started with --nthreads > 1 still runs one item at a time
 
 
@@ -46,17 +54,14 @@ class TaichiWorkerSetup(distributed.WorkerPlugin):
         self.arch, self.threads = arch, threads
 
     async def setup(self, worker) -> None:
+        if (getattr(worker, "nthreads", 1) or 1) > 1:
+            logging.getLogger("distributed.worker").warning(
+                "tbd-taichi: this worker has %s threads but runs one item at a time (one Taichi runtime per "
+                "process); start more worker processes with --nthreads 1 instead", worker.nthreads)
         pool = worker.executors.get("default")
         if pool is None:  # pragma: no cover - another distributed layout: the first item starts it
             return
         await asyncio.get_running_loop().run_in_executor(pool, _start_quietly, self.arch, self.threads)
-
-    def teardown(self, worker) -> None:
-        """A worker that closes normally saves the kernels it compiled to Taichi's offline cache."""
-        try:
-            stop_backend()
-        except Exception:  # pragma: no cover - closing anyway
-            pass
 
 
 class DaskCluster:
@@ -77,13 +82,14 @@ class DaskCluster:
             raise TBDError(f"--scheduler {scheduler}: no Dask scheduler answered within {CONNECT_TIMEOUT_S} s "
                            f"({exc})") from None
         self.client.register_plugin(TaichiWorkerSetup(arch, threads))
+        self._label = f"{self.workers()} ({'LocalCluster' if self.cluster is not None else 'Dask'})"
 
     def workers(self) -> int:
         return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
 
     def label(self) -> str:
-        kind = "LocalCluster" if self.cluster is not None else "Dask"
-        return f"{self.workers()} ({kind})"
+        """The workers when the command began, and the kind of cluster (workers may come and go later)."""
+        return self._label
 
     def describe(self) -> str:
         where = "a Dask LocalCluster" if self.cluster is not None else f"the Dask scheduler {self.scheduler}"

@@ -20,7 +20,7 @@ LOCAL_DASK = "local-dask"
 SCHEDULER_HELP = ("run on a Dask cluster: tcp://HOST:PORT of a running `dask scheduler`, or local-dask for a "
                   "distributed.LocalCluster of --workers processes on this machine (needs pip install "
                   "'tbd-taichi[cluster]'; inputs must be paths every worker can read)")
-_ADDRESS = re.compile(r"^(tcp|tls|ws|wss|inproc)://[^\s:/]+(:\d{1,5})?$")
+_ADDRESS = re.compile(r"^(tcp|tls|ws|wss|inproc)://([^\s:/\[\]]+|\[[0-9A-Fa-f:.]+\])(:\d{1,5})?$")
 _BACKEND: dict = {}  # this process's Taichi start: {"key": (arch, threads), "error": message or None}
 
 
@@ -79,9 +79,14 @@ def guarded(fn: Callable, item, arch: str, threads: int | None) -> Outcome:
     try:
         return Outcome(item, fn(item))
     except TBDError as exc:
-        return Outcome(item, error=str(exc))
+        return Outcome(item, error=one_line(str(exc)))
     except Exception as exc:  # an item's own failure must not stop the others
-        return Outcome(item, error=f"{type(exc).__name__}: {exc}")
+        return Outcome(item, error=one_line(f"{type(exc).__name__}: {exc}"))
+
+
+def one_line(text: str) -> str:
+    """An error message on one line (an OpenCV or NumPy message may span several)."""
+    return " ".join(text.split())
 
 
 def _pool_initializer(arch: str, threads: int | None) -> None:

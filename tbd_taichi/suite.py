@@ -42,18 +42,21 @@ class Run:
     test: int
     seed: int
     preset_snr: float = 0.0  # the trackers' snr parameter; 0: the condition's SNR
+    explain: bool = False  # SGDS-PF: record which stage lost the target (methods/sgds/explain.py)
 
     @property
     def key(self) -> str:
         preset = f"/preset{self.preset_snr:g}" if self.preset_snr else ""
-        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}"
+        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}" + ("/explain" if self.explain else "")
 
 
-def plan(snrs=SNRS, sizes=SIZES, methods=DEFAULT_METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0) -> list[Run]:
+def plan(snrs=SNRS, sizes=SIZES, methods=DEFAULT_METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0,
+         explain: bool = False) -> list[Run]:
     """Every run of the suite; test k uses scenario seed ``seed + k``.  ``preset_snr`` > 0 gives
-    every tracker that ``snr`` (Table 2 / Table 3 column) instead of the condition's SNR."""
-    return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr)) for side, frames in sizes for snr in snrs
-            for k in range(tests) for m in methods]
+    every tracker that ``snr`` (Table 2 / Table 3 column) instead of the condition's SNR; ``explain`` records
+    the stages of SGDS-PF's runs."""
+    return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr), explain and m == "sgds")
+            for side, frames in sizes for snr in snrs for k in range(tests) for m in methods]
 
 
 def edt_when_detected(tracks: np.ndarray, truth: np.ndarray, t0: float = metrics.T0) -> float:
@@ -80,16 +83,26 @@ def run_one(run: Run) -> dict:
             warm.update(frame)
         del warm
         _WARM.add(warm_up)
-    tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed)
+    tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper")
+    recorder = None
+    if run.explain:  # watches the tracker; the tracks are the same
+        from .methods.sgds.explain import StageRecorder
+
+        recorder = StageRecorder(tracker.tracker, scene.truth)
     t0 = time.perf_counter()
     for frame in scene.frames:
         tracker.update(frame)
     tracks = tracker.finish()
     ms = (time.perf_counter() - t0) / run.frames * 1e3
     scores = metrics.evaluate(tracks, scene.truth, n_frames=run.frames)
-    return dict(asdict(run), key=run.key, dsr=scores["dsr"], edt=edt_when_detected(tracks, scene.truth),
-                false_tracks=int(scores["false_tracks"]), ospa=scores["ospa"], ms_per_frame=ms,
-                machine=machine_description())
+    row = dict(asdict(run), key=run.key, dsr=scores["dsr"], edt=edt_when_detected(tracks, scene.truth),
+               false_tracks=int(scores["false_tracks"]), ospa=scores["ospa"], ms_per_frame=ms,
+               machine=machine_description())
+    if recorder is not None:
+        from .methods.sgds.explain import explained_fields
+
+        row.update(explained_fields(recorder, tracks, scene.truth, scores["dsr"]))
+    return row
 
 
 def load_runs(path: Path) -> dict[str, dict]:
@@ -106,9 +119,10 @@ def load_runs(path: Path) -> dict[str, dict]:
 
 
 def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu", threads: int | None = None,
-            progress: bool = True, scheduler: str | None = None) -> tuple[list[dict], bool]:
+            progress: bool = True, scheduler: str | None = None, say=None) -> tuple[list[dict], bool]:
     """Run what ``runs_file`` lacks, appending each result as it finishes; returns (all results of
-    ``runs``, completed).  ``workers``, ``threads`` and ``scheduler`` choose where (:class:`.executor.Fanout`).
+    ``runs``, completed).  ``workers``, ``threads`` and ``scheduler`` choose where (:class:`.executor.Fanout`;
+    ``say`` gets one line naming it).
     Ctrl-C stops the workers and keeps the finished results; a run that fails raises a TBDError naming it
     (the runs finished before it are kept)."""
     from .executor import Fanout
@@ -120,6 +134,8 @@ def execute(runs: list[Run], runs_file: Path, workers: int = 1, arch: str = "cpu
     with open(runs_file, "a") as out, progress_bar("evaluation runs", progress, rate_unit="runs") as bar, \
             Fanout(workers, arch, threads, scheduler) as fanout:
         task = bar.add_task("runs", total=len(runs), completed=len(runs) - len(todo)) if bar is not None else None
+        if say is not None:
+            say(f"{len(todo)} run(s) to do on {fanout.describe()}")
         try:
             for outcome in fanout.run(run_one, todo):
                 if outcome.error:
@@ -268,4 +284,23 @@ def write_report(results: list[dict], out_dir: Path, command: str, completed: bo
     path = out_dir / "suite.md"
     path.write_text(text)
     (out_dir / "suite.json").write_text(json.dumps(dict(command=command, completed=completed, rows=rows), indent=1))
+    return path
+
+
+def write_explained(results: list[dict], out_dir: Path, command: str) -> Path:
+    """explain.md: SGDS-PF's missed and late runs split by the stage that lost the target
+    (:mod:`.methods.sgds.explain`), and each such run's stage frames."""
+    from .methods.sgds.explain import LATE_FRAMES, stage_table
+
+    lost = [r for r in results if r.get("stage") not in (None, "detected")]
+    lines = ["# Where SGDS-PF lost the target", "", f"Reproduce with `{command}`.", "",
+             f"Missed: DSR ≤ {metrics.T1:g} (Eq. 49). Late: the tracks first come within {metrics.T0:g} px of the "
+             f"target more than {LATE_FRAMES} frames after its first frame. Stages as in "
+             "`tbd_taichi/methods/sgds/explain.py`.", "", stage_table(results), "",
+             "| run | DSR | stage | candidate | hand-over | confirmed | drops | first detection |",
+             "|---|---:|---|---:|---:|---:|---:|---:|"]
+    lines += [f"| {r['key']} | {r['dsr']:.2f} | {r['stage']} | {r['candidate_at']} | {r['handover_at']} | "
+              f"{r['confirmed_at']} | {r['drops']} | {r['detected_at']} |" for r in lost]
+    path = out_dir / "explain.md"
+    path.write_text("\n".join(lines) + "\n")
     return path

@@ -51,8 +51,13 @@ def test_corrupt_input_is_recorded_and_the_rerun_does_only_it(tmp_path, capsys):
     assert summary_rows(out)["good1"] == rows["good1"]  # the earlier row is kept
     (clips / "broken.npy").unlink()
     write_clip(clips / "broken.npy", 3)  # repaired: the rerun tracks it and succeeds
+    (out / ".broken.0123abcd.partial.csv").write_text("left by a killed run")
     assert cli.main(argv) == 0
     assert summary_rows(out)["broken"]["status"] == "ok"
+    assert not list(out.glob(".*partial*")), "a killed run's temporary file is removed"
+    capsys.readouterr()
+    assert cli.main(argv[:-1] + ["n_particles=3000"]) == 2  # other settings: the folder's outputs are not theirs
+    assert "other settings (params" in capsys.readouterr().err
 
 
 def test_outputs_match_track_and_extras_are_written(tmp_path):
@@ -78,6 +83,13 @@ def test_inputs_from_globs_folders_and_name_clashes(tmp_path):
                      frames.resolve()]  # each input once
     assert batch.output_names(paths) == ["day1__clip", "day2__clip", "frames"]
     assert batch.folder_inputs(tmp_path) == [frames]  # a folder of folders: its image folders
+    np.savez(tmp_path / "day1" / "clip.npz", frames=np.zeros((2, 8, 8), np.float32))
+    np.save(tmp_path / "day2" / "Other.npy", np.zeros((2, 8, 8), np.float32))
+    np.save(tmp_path / "day1" / "other.npy", np.zeros((2, 8, 8), np.float32))
+    paths = batch.expand_inputs([str(tmp_path / "day1"), str(tmp_path / "day2" / "Other.npy")])
+    assert [p.name for p in paths] == ["clip.npy", "clip.npz", "other.npy", "Other.npy"]
+    # only the clashing inputs are renamed: same stem (suffix kept), and names equal but for case
+    assert batch.output_names(paths) == ["day1__clip_npy", "day1__clip_npz", "day1__other", "day2__Other"]
 
 
 @pytest.mark.parametrize("inputs, message", [

@@ -114,14 +114,19 @@ def test_scheduler_cluster_survives_a_killed_worker_and_runs_a_batch(dask_cluste
                "--scheduler", address]
     suite_proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     runs_file = out_dir / "suite_runs.jsonl"
-    deadline = time.monotonic() + 240
-    while not (runs_file.is_file() and runs_file.read_text().count("\n") >= 1):  # the workers are warm
-        assert suite_proc.poll() is None, suite_proc.stdout.read()
-        assert time.monotonic() < deadline, "no run finished"
-        time.sleep(0.05)
-    done_at_kill = runs_file.read_text().count("\n")
-    os.kill(workers["worker-2"].pid, signal.SIGKILL)
-    output, _ = suite_proc.communicate(timeout=240)
+    try:
+        deadline = time.monotonic() + 240
+        while not (runs_file.is_file() and runs_file.read_text().count("\n") >= 1):  # the workers are warm
+            assert suite_proc.poll() is None, suite_proc.stdout.read()
+            assert time.monotonic() < deadline, "no run finished"
+            time.sleep(0.05)
+        done_at_kill = runs_file.read_text().count("\n")
+        os.kill(workers["worker-2"].pid, signal.SIGKILL)
+        output, _ = suite_proc.communicate(timeout=240)
+    finally:
+        if suite_proc.poll() is None:  # stopped by its id whatever failed above
+            os.kill(suite_proc.pid, signal.SIGKILL)
+            suite_proc.wait()
     assert suite_proc.returncode == 0, output
     assert done_at_kill < len(RUNS)  # the kill came while runs were left
     results = [json.loads(line) for line in runs_file.read_text().splitlines()]
