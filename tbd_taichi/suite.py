@@ -77,10 +77,11 @@ def run_one(run: Run) -> dict:
     scene = simulate((run.side, run.side), frames=run.frames, snr=run.snr, seed=run.seed)
     preset = run.preset_snr or run.snr
     warm_up = (run.method, run.side, preset)
-    if warm_up not in _WARM:  # compile this configuration's kernels outside the timing
-        warm = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed)
-        for frame in scene.frames[:12]:
+    if warm_up not in _WARM:  # compile this configuration's kernels outside the timing: the same run, untimed
+        warm = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper")
+        for frame in scene.frames:  # whole: kernels first used late (the first hand-over, a track's step) too
             warm.update(frame)
+        warm.finish()
         del warm
         _WARM.add(warm_up)
     tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper")

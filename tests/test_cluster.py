@@ -20,8 +20,8 @@ from tbd_taichi import cli, suite  # noqa: E402
 from tbd_taichi.executor import Fanout  # noqa: E402
 from tbd_taichi.simulate import simulate  # noqa: E402
 
-# SNR 2.0, 50x50 (70 frames), 6 tests, SGDS-PF and the PF: 12 runs
-RUNS = suite.plan(snrs=(2.0,), sizes=((50, 70),), methods=("sgds", "pf"), tests=6, seed=0)
+# SNR 2.0, 50x50 (70 frames), 4 tests, SGDS-PF and the PF: 8 runs
+RUNS = suite.plan(snrs=(2.0,), sizes=((50, 70),), methods=("sgds", "pf"), tests=4, seed=0)
 TIMING = {"ms_per_frame", "workers", "machine"}
 
 
@@ -109,7 +109,7 @@ def wait_for_workers(address: str, n: int, timeout: float = 60) -> None:
 def test_scheduler_cluster_survives_a_killed_worker_and_runs_a_batch(dask_cluster, pool_results, tmp_path):
     address, workers = dask_cluster
     out_dir = tmp_path / "suite"
-    command = [sys.executable, "-m", "tbd_taichi", "evaluate-suite", "--snrs", "2", "--size", "50", "--tests", "6",
+    command = [sys.executable, "-m", "tbd_taichi", "evaluate-suite", "--snrs", "2", "--size", "50", "--tests", "4",
                "--methods", "sgds,pf", "--seed", "0", "--out-dir", str(out_dir), "--no-progress",
                "--scheduler", address]
     suite_proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
