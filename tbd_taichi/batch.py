@@ -31,13 +31,17 @@ def is_image_folder(path: Path) -> bool:
     return path.is_dir() and any(p.suffix.lower() in io.IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
 
 
+def is_sequence(path: Path) -> bool:
+    """A video, a .npy/.npz file or a folder of images."""
+    return (path.is_file() and path.suffix.lower() in SEQUENCE_SUFFIXES) or is_image_folder(path)
+
+
 def folder_inputs(folder: Path) -> list[Path]:
     """A folder given as an input: itself if it holds images, else its videos and arrays and its image
     subfolders (one level), naturally sorted."""
     if is_image_folder(folder):
         return [folder]
-    found = [p for p in folder.iterdir()
-             if (p.is_file() and p.suffix.lower() in SEQUENCE_SUFFIXES) or is_image_folder(p)]
+    found = [p for p in folder.iterdir() if is_sequence(p)]
     if not found:
         raise TBDError(f"INPUTS: folder {folder} holds no videos, .npy/.npz files or image folders")
     return sorted(found, key=lambda p: io.natural_key(p.name))
@@ -50,9 +54,7 @@ def expand_inputs(patterns) -> list[Path]:
     for text in patterns:
         if glob.has_magic(text):
             matches = [Path(m) for m in sorted(glob.glob(os.path.expanduser(text), recursive=True),
-                                               key=io.natural_key)]
-            matches = [m for m in matches if (m.is_file() and m.suffix.lower() in SEQUENCE_SUFFIXES)
-                       or is_image_folder(m)]
+                                               key=io.natural_key) if is_sequence(Path(m))]
             if not matches:
                 raise TBDError(f"INPUTS: {text!r} matches no video, .npy/.npz file or image folder")
             found += matches
@@ -66,10 +68,7 @@ def expand_inputs(patterns) -> list[Path]:
             found.append(path)
         else:
             raise TBDError(f"INPUTS: {path} does not exist")
-    unique: dict[Path, None] = {}
-    for path in found:
-        unique.setdefault(path.resolve(), None)
-    return list(unique)
+    return list(dict.fromkeys(path.resolve() for path in found))
 
 
 def output_names(paths: list[Path]) -> list[str]:
@@ -84,9 +83,9 @@ def output_names(paths: list[Path]) -> list[str]:
         return text.replace(".", "_") if suffix else text
 
     names = [p.stem if p.is_file() else p.name for p in paths]
-    for rename in (lambda p: relative(p, False), lambda p: relative(p, True)):
+    for suffix in (False, True):
         folded = Counter(n.casefold() for n in names)
-        names = [rename(p) if folded[n.casefold()] > 1 else n for p, n in zip(paths, names)]
+        names = [relative(p, suffix) if folded[n.casefold()] > 1 else n for p, n in zip(paths, names)]
     clashes = [n for n, k in Counter(n.casefold() for n in names).items() if k > 1]
     if clashes:
         raise TBDError(f"INPUTS: more than one input would write {clashes[0]}.csv; rename one")
@@ -169,8 +168,9 @@ def track_one(item: BatchItem) -> dict:
                 status="ok", error="")
 
 
-def failed_row(item: BatchItem, error: str) -> dict:
-    return dict(input=item.input, name=item.name, frames="", tracks="", tracker_fps="", wall_s="", status="failed",
+def summary_row(item: BatchItem, status: str, error: str = "") -> dict:
+    """A summary row without figures: ``pending``, ``failed`` (with its error) or ``ok`` from an earlier run."""
+    return dict(input=item.input, name=item.name, frames="", tracks="", tracker_fps="", wall_s="", status=status,
                 error=error)
 
 
@@ -195,5 +195,5 @@ def write_summary(out_dir: Path, rows: list[dict]) -> Path:
     return path
 
 
-__all__ = ["BatchItem", "SETTINGS", "SUMMARY", "check_settings", "expand_inputs", "failed_row", "output_names",
-           "plan_item", "read_summary", "remove_stale_partials", "track_one", "write_settings", "write_summary"]
+__all__ = ["BatchItem", "SETTINGS", "SUMMARY", "check_settings", "expand_inputs", "output_names",
+           "plan_item", "read_summary", "remove_stale_partials", "summary_row", "track_one", "write_settings", "write_summary"]

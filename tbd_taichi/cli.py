@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import backend, compile_stats, methods, metrics, tables, validate
+from . import backend, methods, metrics, tables, validate
 from .cli_batch import add_batch_parser
 from .cli_simulate import add_simulate_parser
 from .cli_track import FRONTEND_PROCESS_HELP, add_track_parser, format_scores
 from .cli_warmup import add_warmup_parser
 from .errors import TBDError
-from .executor import SCHEDULER_HELP, check_scheduler
+from .executor import SCHEDULER_HELP, check_scheduler, start_backend
 
 ARCH_HELP = ("Taichi backend: cpu (default), cuda, vulkan, metal, gpu (first GPU found) or auto "
              "(a GPU if there is one, else the CPU)")
@@ -105,7 +105,9 @@ def _float_list(text: str, name: str) -> tuple[float, ...]:
 
 
 def check_evaluate_suite(args) -> dict:
-    """The methods, SNRs, sizes and output folder: the suite's plan."""
+    """The methods, SNRs, sizes, output folder, scheduler and workers: the suite's plan."""
+    import os
+
     from . import suite
 
     chosen = tuple(m.strip() for m in args.methods.split(",") if m.strip())
@@ -146,12 +148,17 @@ def check_evaluate_suite(args) -> dict:
         raise TBDError(f"--out-dir {out_dir}: is a file; give a folder")
     validate.output_path("--out-dir", out_dir / "suite_runs.jsonl") if out_dir.is_dir() else \
         validate.output_path("--out-dir", out_dir)  # a new folder: its parent must exist and be writable
-    return dict(chosen=chosen, snrs=snrs, sizes=sizes, tests=tests, out_dir=out_dir, scheduler=scheduler)
+    workers = args.workers or os.cpu_count() or 1
+    return dict(chosen=chosen, snrs=snrs, sizes=sizes, tests=tests, out_dir=out_dir, scheduler=scheduler,
+                workers=workers)
+
+
+def suite_fans_out(args) -> bool:
+    """evaluate-suite's runs go to worker processes: the jia2022 suite on a scheduler or on more than one worker."""
+    return args.scenario == "jia2022" and bool(args.scheduler or args.checked["workers"] > 1)
 
 
 def cmd_evaluate_suite(args) -> int:
-    import os
-
     from . import suite
 
     plan = args.checked
@@ -164,7 +171,7 @@ def cmd_evaluate_suite(args) -> int:
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
     runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0, explain=args.explain)
     out_dir.mkdir(exist_ok=True)
-    workers = args.workers or os.cpu_count() or 1
+    workers = plan["workers"]
     where = plan["scheduler"] or f"{workers} worker(s)"
     print(f"{len(runs)} runs ({len(chosen)} method(s) x {len(sizes)} size(s) x {len(snrs)} SNR(s) x {tests} test(s)), "
           f"{where} -> {out_dir}")
@@ -336,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "OUT_DIR/explain.md")
     es.add_argument("--no-progress", action="store_true", help="no progress bar")
     _common(es)
-    es.set_defaults(func=cmd_evaluate_suite, check=check_evaluate_suite)
+    es.set_defaults(func=cmd_evaluate_suite, check=check_evaluate_suite, fans_out=suite_fans_out)
 
     be = sub.add_parser("bench", help="time each stage, Taichi against NumPy",
                         description="Median milliseconds per frame for each stage of SGDSPF.update (normalise, "
@@ -372,29 +379,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def fans_out(args) -> bool:
-    """The command's work runs in worker processes (a pool or a Dask cluster), not in this one."""
-    if getattr(args, "scheduler", None):
-        return True
-    if args.command == "batch-track":
-        return args.workers > 1
-    if args.command == "evaluate-suite" and args.scenario == "jia2022":
-        import os
-
-        return (args.workers or os.cpu_count() or 1) > 1
-    return False
-
-
 def main(argv=None) -> int:
     """Parse, check (before the backend starts), then run one sub-command; a TBDError is one line, exit 2."""
     args = build_parser().parse_args(argv)
     try:
         check = getattr(args, "check", None)
         args.checked = check(args) if check else None
-        backend.keep_freed_memory()
-        compile_stats.start_counting()
-        if not fans_out(args):  # workers start their own backend (--arch may name one this machine lacks)
-            backend.init(args.arch, threads=args.threads)
+        if not getattr(args, "fans_out", lambda a: False)(args):  # else the workers start their own backend
+            start_backend(args.arch, args.threads)  # (--arch may name one this machine lacks)
         return args.func(args)
     except TBDError as exc:
         print(f"tbd-taichi {args.command}: error: {exc}", file=sys.stderr)

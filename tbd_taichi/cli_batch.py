@@ -41,7 +41,8 @@ def add_batch_parser(sub, common) -> None:
     bt.add_argument("--scheduler", default=None, metavar="ADDRESS", help=SCHEDULER_HELP)
     bt.add_argument("--no-progress", action="store_true", help="no progress bar")
     common(bt)
-    bt.set_defaults(func=cmd_batch_track, check=check_batch_track)
+    bt.set_defaults(func=cmd_batch_track, check=check_batch_track,
+                    fans_out=lambda args: bool(args.scheduler) or args.workers > 1)
 
 
 def check_batch_track(args) -> list[batch.BatchItem]:
@@ -85,12 +86,15 @@ def cmd_batch_track(args) -> int:
         print(f"removed {stale} temporary file(s) that an interrupted batch left in {out_dir}")
     earlier = batch.read_summary(out_dir)
     todo = [item for item in items if not item.complete()]
-    rows = {item.input: dict(batch.failed_row(item, ""), status="pending") for item in todo}
-    for item in items:
-        if item.complete():  # an earlier run's outputs are whole: its row (or a bare one if it has none)
-            row = earlier.get(item.input)
-            rows[item.input] = row if row and row.get("status") == "ok" else dict(batch.failed_row(item, ""), status="ok")
-    rows = {item.input: rows[item.input] for item in items}  # the inputs' order
+    pending = {item.input for item in todo}
+
+    def first_row(item) -> dict:  # an earlier run's row where its outputs are whole (a bare one if it has none)
+        if item.input in pending:
+            return batch.summary_row(item, "pending")
+        row = earlier.get(item.input)
+        return row if row and row.get("status") == "ok" else batch.summary_row(item, "ok")
+
+    rows = {item.input: first_row(item) for item in items}
     failed, completed = 0, True
     with Fanout(args.workers, args.arch, args.threads, args.scheduler) as fanout:
         print(f"{len(items)} input(s), {len(items) - len(todo)} already done; {len(todo)} to track with {args.method} "
@@ -99,7 +103,8 @@ def cmd_batch_track(args) -> int:
             task = bar.add_task("inputs", total=len(items), completed=len(items) - len(todo)) if bar else None
             try:
                 for outcome in fanout.run(batch.track_one, todo):
-                    row = outcome.value if outcome.error is None else batch.failed_row(outcome.item, outcome.error)
+                    row = outcome.value if outcome.error is None else \
+                        batch.summary_row(outcome.item, "failed", outcome.error)
                     failed += row["status"] != "ok"
                     rows[outcome.item.input] = row
                     batch.write_summary(out_dir, list(rows.values()))

@@ -39,6 +39,16 @@ def check_scheduler(value: str | None) -> str | None:
     return value
 
 
+def start_backend(arch: str, threads: int | None) -> None:
+    """Start Taichi in this process as every command does: freed memory kept for reuse, kernel builds counted
+    (:mod:`.compile_stats`), then ``backend.init``."""
+    from . import backend, compile_stats
+
+    backend.keep_freed_memory()
+    compile_stats.start_counting()
+    backend.init(arch, threads=threads)
+
+
 def ensure_backend(arch: str, threads: int | None) -> None:
     """Start Taichi in this process with ``arch`` and ``threads`` once; later calls return at once.  A backend
     that cannot start raises :class:`BackendError` now and at every later call (each item fails fast)."""
@@ -47,13 +57,9 @@ def ensure_backend(arch: str, threads: int | None) -> None:
         if _BACKEND["error"]:
             raise BackendError(_BACKEND["error"])
         return
-    from . import backend, compile_stats
-
     _BACKEND.update(key=key, error=None)
     try:
-        backend.keep_freed_memory()
-        compile_stats.start_counting()
-        backend.init(arch, threads=threads)
+        start_backend(arch, threads)
     except Exception as exc:  # any failure to start: one line, kept for every later item
         _BACKEND["error"] = f"worker could not start the {arch} backend: {exc}"
         raise BackendError(_BACKEND["error"]) from None
@@ -180,4 +186,5 @@ class Fanout:
                 pool.join()
 
 
-__all__ = ["LOCAL_DASK", "SCHEDULER_HELP", "Fanout", "Outcome", "check_scheduler", "ensure_backend", "guarded", "stop_backend"]
+__all__ = ["LOCAL_DASK", "SCHEDULER_HELP", "Fanout", "Outcome", "check_scheduler", "ensure_backend", "guarded",
+           "start_backend", "stop_backend"]

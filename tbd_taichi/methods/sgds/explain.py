@@ -152,7 +152,7 @@ def explained_fields(recorder: StageRecorder, tracks: np.ndarray, truth: np.ndar
 
 def stage_table(results: list[dict]) -> str:
     """Markdown: per size and SNR, SGDS-PF's explained runs, how many were missed (DSR ≤ T1) or late, and the
-    split of those by the stage that lost the target ."""
+    split of those by the stage that lost the target."""
     rows = [r for r in results if r.get("stage")]
     lost = STAGES[:-1]
     lines = ["| size | SNR | runs | missed | late | " + " | ".join(lost) + " |",
