@@ -26,8 +26,7 @@ import numpy as np
 
 from . import metrics
 from .errors import ParameterError
-from .simulate import Scenario, check_memory, intensity_for_snr, render_psf
-from .tables import TRUTH_DTYPE, make_table
+from .simulate import Scenario, check_memory, in_view, intensity_for_snr, render_scene
 
 GEOMETRIES = ("crossing", "parallel")
 
@@ -86,21 +85,13 @@ def simulate_formation(geometry: str = "crossing", targets: int = 2, separation:
     check_formation(geometry, targets, separation, shape, frames, snr, speed, angle)
     states = formation_states(geometry, targets, float(separation), shape, frames, float(speed), float(heading),
                               float(angle))
-    intensity = intensity_for_snr(snr, psf_sigma, noise_sigma)
-    states[:, :, 4] = intensity
-    rng = np.random.default_rng(seed)
-    images = rng.standard_normal((frames,) + shape, dtype=np.float32) * np.float32(noise_sigma)
-    rows = []
-    h, w = shape
-    for k, path in enumerate(states):
-        for f, (x, vx, y, vy, inten) in enumerate(path):
-            render_psf(images[f], x, y, inten, psf_sigma)
-            if -0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5:
-                rows.append((f, k, x, y, vx, vy, inten))
+    states[:, :, 4] = intensity_for_snr(snr, psf_sigma, noise_sigma)
+    paths = [(path, in_view(path, shape, 0.0)) for path in states]
+    images, truth = render_scene(paths, shape, frames, psf_sigma, noise_sigma, np.random.default_rng(seed))
     params = dict(geometry=geometry, targets=targets, separation=float(separation), snr=snr, seed=seed,
                   shape=list(shape), frames=frames, speed=speed, heading=heading, angle=angle,
                   psf_sigma=psf_sigma, noise_sigma=noise_sigma, closest_px=closest_approach(states))
-    return Scenario(images, make_table(sorted(rows), TRUTH_DTYPE), params)
+    return Scenario(images, truth, params)
 
 
 def matched_tracks(tracks: np.ndarray, truth: np.ndarray, gate: float = metrics.T0) -> dict[int, list]:

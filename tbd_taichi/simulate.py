@@ -65,7 +65,9 @@ def ncv_trajectory(rng: np.random.Generator, start: np.ndarray, n_frames: int, q
     return states
 
 
-def _in_view(states: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:
+def in_view(states: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:
+    """Per row of ``states`` ([x, vx, y, vy, I] …): the centre at least ``margin`` px inside the image (pixel
+    centres at integers, so the image spans [−0.5, W − 0.5) × [−0.5, H − 0.5))."""
     h, w = shape
     x, y = states[:, 0], states[:, 2]
     return (x >= margin - 0.5) & (x < w - 0.5 - margin) & (y >= margin - 0.5) & (y < h - 0.5 - margin)
@@ -107,11 +109,11 @@ def target_trajectory(rng, shape, n_frames, intensity, speed, q1, q2, motion, ma
             if start is None:
                 continue
             states = ncv_trajectory(rng, start, n_frames, q1, q2)
-            if _in_view(states, shape, margin).all():
+            if in_view(states, shape, margin).all():
                 return states, np.ones(n_frames, bool)
         else:
             states = ncv_trajectory(rng, _start_transit(rng, shape, speed, intensity), n_frames, q1, q2)
-            visible = _in_view(states, shape, 0.0)
+            visible = in_view(states, shape, 0.0)
             if visible.sum() >= min(5, max(n_frames - 4, 0)):  # entering can take 4 frames
                 return states, visible
     raise ParameterError(f"could not keep a target in a {shape[0]}x{shape[1]} image for {n_frames} frames "
@@ -172,19 +174,28 @@ def simulate(shape=(200, 200), frames: int = 150, snr: float = 2.0, targets: int
     _check(shape, frames, snr, targets, speed, q1, q2, psf_sigma, noise_sigma, motion)
     rng = np.random.default_rng(seed)
     intensity = intensity_for_snr(snr, psf_sigma, noise_sigma)
-    images = np.zeros((frames,) + shape, dtype=np.float32)
+    paths = [target_trajectory(rng, shape, frames, intensity, speed, q1, q2, motion, margin) for _ in range(targets)]
+    images, truth = render_scene(paths, shape, frames, psf_sigma, noise_sigma, rng)
+    params = dict(shape=list(shape), frames=frames, snr=snr, targets=targets, seed=seed, speed=list(speed),
+                  q1=q1, q2=q2, psf_sigma=psf_sigma, noise_sigma=noise_sigma, motion=motion, margin=margin)
+    return Scenario(images, truth, params)
+
+
+def render_scene(paths, shape, frames: int, psf_sigma: float, noise_sigma: float,
+                 rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Frames (T, H, W) float32 and their truth table from ``paths``, one (states (T, 5), in-view mask (T,))
+    per target (its index the target id): each target's PSF (Eq. 14) at every frame, then N(0, σ²) noise drawn
+    from ``rng``; truth rows for the frames in view."""
+    images = np.zeros((frames,) + tuple(shape), dtype=np.float32)
     rows = []
-    for target in range(targets):
-        states, visible = target_trajectory(rng, shape, frames, intensity, speed, q1, q2, motion, margin)
+    for target, (states, visible) in enumerate(paths):
         for f in range(frames):
             x, vx, y, vy, inten = states[f]
             render_psf(images[f], x, y, inten, psf_sigma)
             if visible[f]:
                 rows.append((f, target, x, y, vx, vy, inten))
     images += rng.standard_normal(images.shape, dtype=np.float32) * np.float32(noise_sigma)
-    params = dict(shape=list(shape), frames=frames, snr=snr, targets=targets, seed=seed, speed=list(speed),
-                  q1=q1, q2=q2, psf_sigma=psf_sigma, noise_sigma=noise_sigma, motion=motion, margin=margin)
-    return Scenario(images, make_table(rows, TRUTH_DTYPE), params)
+    return images, make_table(rows, TRUTH_DTYPE)
 
 
 def to_camera(frames: np.ndarray, offset: float = 1000.0, gain: float = 20.0, bits: int = 14) -> np.ndarray:
