@@ -4,16 +4,19 @@ one launch for every particle's kernel-weighted histograms, correlations, fusion
 * :meth:`FeatureFusionKernels.feature_maps`: the bin index of each pixel's grey level (Eq. 12), Sobel edge magnitude
   G = √(G_x² + G_y² + G_45² + G_135²) (Eqs. 14–16, S_135's bottom row read (−2, −1, 0)) and Gabor response
   W = H ∗ I (Eqs. 17–18; H separable: [N(x; σ_x)·cos(ωx)] ⊗ N(y; σ_y)), each quantised to M bins over a range
-  fixed at frame 0; zero padding at the borders;
+  fixed at frame 0; zero padding at the borders (a zero margin around the frame in the fields);
 * :meth:`FeatureFusionKernels.weigh`: for particle p (a box centre), the three histograms over the window
   |i − x| ≤ H_x, |j − y| ≤ H_y weighted by k(r) = 1 − r², r = ‖x₀ − x_i‖/s, s = √(H_x² + H_y²) (Eqs. 11–13); the
   Pearson correlation c_i of each with the template's (Eq. 19); v_i = (c_i + 1)/Σ(c + 1) (Eq. 20); the
   Bhattacharyya coefficients ρ_i and the fused ρ = Σ v_i ρ_i (the v-weighted concatenation of Eq. 21, whose
   bin-wise sum would mix unrelated bins); log p(Y|X) = −(1 − ρ)/(2σ_L²) (Eq. 22 with d² = 1 − ρ);
-* :meth:`FeatureFusionKernels.propagate`: Eq. 1's random walk (or constant velocity) with the counter-based
-  normals, clamped to the frame.
+* :meth:`FeatureFusionKernels.step`: one launch per frame: Eq. 1's random walk (or constant velocity) with the
+  counter-based normals, clamped to the frame; ``weigh`` for every particle; Eqs. 10, 6 and 23 (weights, the
+  estimate, N_eff) in one thread; ``weigh`` at the estimate.  Its constants come from :meth:`configure`.
 
 The NumPy twin is ``tbd_taichi.numpy_kernels.feature_fusion``."""
+import math
+
 import numpy as np
 import taichi as ti
 
@@ -21,6 +24,8 @@ from .rng import NormalTables, key_prefix, normal_at
 
 FEATURES = 3  # grey, edge, Gabor
 S_X, S_Y = 0, 1  # random-walk streams
+SERIAL_WORK = 50_000  # particle-pixels: below this, step() runs its particle loops in one thread (serial_step)
+CONFIG = ("sigma_q", "velocity", "half_x", "half_y", "sigma_l", "adaptive")  # step()'s constants, in this order
 MAX_HALF = 64  # px: the largest half window (a box of 129 px)
 SOBEL = (
     ((1, 2, 1), (0, 0, 0), (-1, -2, -1)),  # S_x
@@ -39,6 +44,13 @@ def gabor_taps(sigma_x: float, sigma_y: float, omega: float) -> tuple[np.ndarray
     return row.astype(np.float32), col.astype(np.float32)
 
 
+def serial_step(n: int, half_x: float, half_y: float) -> bool:
+    """Whether :meth:`FeatureFusionKernels.step` should run its particle loops in one thread: when the histograms'
+    work, n particles × the window's pixels, is below ``SERIAL_WORK`` (a parallel loop's start, tens of µs on the
+    CPU backend, would cost more than it saves; docs/performance.md#feature-fusion-issue-39)."""
+    return n * (2 * math.floor(half_x) + 1) * (2 * math.floor(half_y) + 1) < SERIAL_WORK
+
+
 @ti.data_oriented
 class FeatureFusionKernels:
     """Fields for ``n`` particles, frames of ``shape``, ``bins`` histogram bins and the Gabor taps' half widths."""
@@ -47,8 +59,9 @@ class FeatureFusionKernels:
         self.n, self.shape, self.bins = int(n), (int(shape[0]), int(shape[1])), int(bins)
         self.gx, self.gy = (int(v) for v in gabor_halves)
         h, w = self.shape
-        self.image = ti.field(ti.f32, (h, w))
-        self.rowpass = ti.field(ti.f32, (h, w))
+        self.margin = m = max(self.gx, self.gy, 1)  # zero border: every tap reads without a bounds test
+        self.image = ti.field(ti.f32, (h + 2 * m, w + 2 * m))  # the frame at [m, m + h) × [m, m + w)
+        self.rowpass = ti.field(ti.f32, (h + 2 * m, w))  # the row pass at rows [m, m + h)
         self.binmap = ti.field(ti.i32, (FEATURES, h, w))
         self.ranges = ti.field(ti.f32, (FEATURES, 2))  # lo, hi of each feature's bins
         self.row_taps, self.col_taps = ti.field(ti.f32, 2 * self.gx + 1), ti.field(ti.f32, 2 * self.gy + 1)
@@ -58,6 +71,7 @@ class FeatureFusionKernels:
         self.loglik, self.rho = ti.field(ti.f32, self.n), ti.field(ti.f32, self.n)
         self.fusion = ti.field(ti.f32, (self.n, FEATURES))
         self.logw = ti.field(ti.f64, self.n)  # accumulated log-weights (slot n − 1, the estimate, unused)
+        self.config = ti.field(ti.f32, len(CONFIG))
         self.tables = NormalTables.shared()
 
     # ------------------------------------------------------------------ Eqs. 12, 14–18: per-pixel maps
@@ -67,31 +81,27 @@ class FeatureFusionKernels:
                      write_raw: ti.i32):
         """binmap[f] = each pixel's bin of grey (the frame), edge magnitude G and Gabor response W; with
         ``write_raw``, ``raw`` (3, H, W) gets the unquantised values (frame 0 sets the ranges from them)."""
-        h, w = ti.static(self.shape)
+        h, w, m = ti.static(self.shape[0], self.shape[1], self.margin)
         for r, c in ti.ndrange(h, w):
-            self.image[r, c] = frame[r, c]
+            self.image[r + m, c + m] = frame[r, c]
         for r, c in ti.ndrange(h, w):
             acc = ti.f32(0.0)
             for k in ti.static(range(-self.gx, self.gx + 1)):
-                if 0 <= c + k < w:
-                    acc += self.row_taps[k + self.gx] * self.image[r, c + k]
-            self.rowpass[r, c] = acc
+                acc += self.row_taps[k + self.gx] * self.image[r + m, c + m + k]
+            self.rowpass[r + m, c] = acc
         for r, c in ti.ndrange(h, w):
             gabor = ti.f32(0.0)
             for k in ti.static(range(-self.gy, self.gy + 1)):
-                if 0 <= r + k < h:
-                    gabor += self.col_taps[k + self.gy] * self.rowpass[r + k, c]
+                gabor += self.col_taps[k + self.gy] * self.rowpass[r + m + k, c]
             g2 = ti.f32(0.0)
             for s in ti.static(range(4)):
                 acc = ti.f32(0.0)
                 for a in ti.static(range(3)):
                     for b in ti.static(range(3)):
                         if ti.static(SOBEL[s][a][b] != 0):
-                            rr, cc = r + a - 1, c + b - 1
-                            if 0 <= rr < h and 0 <= cc < w:
-                                acc += ti.static(float(SOBEL[s][a][b])) * self.image[rr, cc]
+                            acc += ti.static(float(SOBEL[s][a][b])) * self.image[r + m + a - 1, c + m + b - 1]
                 g2 += acc * acc
-            values = ti.Vector([self.image[r, c], ti.sqrt(g2), gabor], dt=ti.f32)
+            values = ti.Vector([self.image[r + m, c + m], ti.sqrt(g2), gabor], dt=ti.f32)
             for f in ti.static(range(FEATURES)):
                 if write_raw != 0:
                     raw[f, r, c] = values[f]
@@ -115,6 +125,12 @@ class FeatureFusionKernels:
 
     @ti.kernel
     def weigh(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32, adaptive: ti.i32):
+        """:meth:`weigh_range` with these constants (frame 0's template, tests)."""
+        self.weigh_range(first, count, half_x, half_y, sigma_l, adaptive)
+
+    @ti.func
+    def weigh_range(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32,
+                    adaptive: ti.i32):
         """Particles [first, first + count): histograms (Eqs. 11–13), c_i (Eq. 19), v_i (Eq. 20; ``adaptive`` = 0:
         grey only, v = (1, 0, 0)), ρ = Σ v_i ρ_i (Eqs. 21–22) and loglik = −(1 − ρ)/(2σ_L²)."""
         h, w = ti.static(self.shape)
@@ -183,7 +199,38 @@ class FeatureFusionKernels:
     # ------------------------------------------------------------------ Eqs. 6, 10, 23
 
     @ti.kernel
-    def accumulate(self, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+    def step(self, seed: ti.u32, frame: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1), serial: ti.template()):
+        """One frame in one launch (:meth:`frame_step`); ``serial``: all of it in the launching thread
+        (:func:`serial_step`: for a few hundred particles a parallel loop's start costs more than its work)."""
+        if ti.static(serial):
+            ti.loop_config(serialize=True)
+            for _ in range(1):
+                self.frame_step(seed, frame, out)
+        else:
+            self.frame_step(seed, frame, out)
+
+    @ti.func
+    def frame_step(self, seed: ti.u32, frame: ti.i32, out: ti.template()):
+        """:meth:`random_walk`, :meth:`weigh_range` for particles [0, n − 1), :meth:`accumulate` (the estimate to
+        slot n − 1) and :meth:`weigh_range` at the estimate, with :meth:`configure`'s constants; out = (x̂, ŷ,
+        N_eff, ρ at x̂)."""
+        sigma_q, velocity = self.config[0], ti.cast(self.config[1], ti.i32)
+        half_x, half_y, sigma_l = self.config[2], self.config[3], self.config[4]
+        adaptive = ti.cast(self.config[5], ti.i32)
+        self.random_walk(seed, frame, sigma_q, velocity)
+        self.weigh_range(0, self.n - 1, half_x, half_y, sigma_l, adaptive)
+        self.accumulate(out)
+        self.weigh_range(self.n - 1, 1, half_x, half_y, sigma_l, adaptive)
+        out[3] = ti.cast(self.rho[self.n - 1], ti.f64)
+
+    def configure(self, sigma_q: float, velocity: int, half_x: float, half_y: float, sigma_l: float,
+                  adaptive: int) -> None:
+        """:meth:`step`'s constants (``CONFIG``): σ_q (px), constant velocity (0/1), the half window H_x, H_y
+        (px), σ_L and adaptive fusion (0/1)."""
+        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, adaptive])
+
+    @ti.func
+    def accumulate(self, out: ti.template()):
         """In one thread, particles [0, n − 1): logw += loglik (Eq. 10 with the transition as the proposal), the
         normalised weights, the estimate Σ w·x (Eq. 6) into slot n − 1 and N_eff = 1/Σ w² (Eq. 23);
         out[:3] = (x̂, ŷ, N_eff)."""
@@ -207,16 +254,10 @@ class FeatureFusionKernels:
             self.state[self.n - 1, 1] = ti.cast(sy / total, ti.f32)
             out[0], out[1], out[2] = sx / total, sy / total, 1.0 / sq
 
-    @ti.kernel
-    def peek(self, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
-        """out[3] = ρ of slot n − 1 (the estimate, once weighed)."""
-        for _ in range(1):
-            out[3] = ti.cast(self.rho[self.n - 1], ti.f64)
-
     # ------------------------------------------------------------------ Eq. 1
 
-    @ti.kernel
-    def propagate(self, seed: ti.u32, frame: ti.i32, sigma_q: ti.f32, velocity: ti.i32):
+    @ti.func
+    def random_walk(self, seed: ti.u32, frame: ti.i32, sigma_q: ti.f32, velocity: ti.i32):
         """x ← x + ẋ·velocity + σ_q·n per axis (Eq. 1: a random walk, or constant velocity), kept in the frame;
         with ``velocity`` the displacement becomes the particle's velocity."""
         h, w = ti.static(self.shape)

@@ -21,7 +21,7 @@ from .. import backend
 from ..engines import kernel_module
 from ..errors import ParameterError
 from ..io import stream_frame
-from ..kernels.feature_fusion import FEATURES, MAX_HALF, gabor_taps
+from ..kernels.feature_fusion import FEATURES, MAX_HALF, gabor_taps, serial_step
 from ..numpy_kernels.rng import normal, uniform
 from ..tables import TRACK_COLUMNS, _dtype, make_table
 from .registry import MethodSpec, OneSequence, param, validate_params
@@ -123,6 +123,9 @@ class FeatureFusionTracker(OneSequence):
                                                lambda: module.FeatureFusionKernels(*dims)))
         self.k.put("row_taps", row)
         self.k.put("col_taps", col)
+        self.serial = serial_step(self.n, *self.half)
+        self.k.configure(self.p.sigma_q, int(self.p.motion == "constant-velocity"), *self.half, self.p.sigma_l,
+                         int(self.p.fusion == "adaptive"))
         self.raw = np.zeros((FEATURES,) + self.shape, np.float32)
         self.centre = np.array([x + w / 2.0, y + h / 2.0])  # the box centre, as drone-ir's cx, cy
         self.summary = np.zeros(4)  # x̂, ŷ, N_eff, ρ at the estimate
@@ -166,11 +169,7 @@ class FeatureFusionTracker(OneSequence):
             return self.rows[-1:]
         self.k.feature_maps(z, self.raw, 0)
         t1 = time.perf_counter()
-        self.k.propagate(self.seed, self.frame, self.p.sigma_q, int(self.p.motion == "constant-velocity"))
-        self._weigh(0, self.n)
-        self.k.accumulate(self.summary)  # Eqs. 10, 6, 23: the estimate goes to slot N
-        self._weigh(self.n, 1)
-        self.k.peek(self.summary)
+        self.k.step(self.seed, self.frame, self.summary, self.serial)  # Eqs. 1, 11–22, 10, 6, 23: x̂ to slot N
         estimate, neff, rho = self.summary[:2].copy(), self.summary[2], float(self.summary[3])
         t2 = time.perf_counter()
         if neff < self.p.n_th * self.n:  # Eq. 23

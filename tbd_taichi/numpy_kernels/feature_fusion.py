@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.feature_fusion import FEATURES, S_X, S_Y, SOBEL
+from ..kernels.feature_fusion import CONFIG, FEATURES, S_X, S_Y, SOBEL
 from .rng import normal
 
 F32 = np.float32
@@ -35,6 +35,7 @@ class FeatureFusionKernels:
         self.loglik, self.rho = np.zeros(self.n, F32), np.zeros(self.n, F32)
         self.fusion = np.zeros((self.n, FEATURES), F32)
         self.logw = np.zeros(self.n)
+        self.config = np.zeros(len(CONFIG), F32)
 
     def put(self, name: str, values) -> None:
         target = getattr(self, name)
@@ -124,11 +125,22 @@ class FeatureFusionKernels:
         self.state[m, 0], self.state[m, 1] = x, y
         out[:3] = (x, y, 1.0 / ((w / total) ** 2).sum())
 
-    def peek(self, out: np.ndarray) -> None:
-        """out[3] = ρ of the last slot."""
+    def configure(self, sigma_q: float, velocity: int, half_x: float, half_y: float, sigma_l: float,
+                  adaptive: int) -> None:
+        """step()'s constants (``CONFIG``), as the kernel's."""
+        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, adaptive])
+
+    def step(self, seed: int, frame: int, out: np.ndarray, serial: bool = False) -> None:
+        """The random walk, every particle weighed, Eqs. 10, 6, 23, the estimate weighed (see the kernel; ``serial``
+        changes nothing here)."""
+        sigma_q, velocity, half_x, half_y, sigma_l, adaptive = self.config
+        self.random_walk(seed, frame, sigma_q, int(velocity))
+        self.weigh(0, self.n - 1, half_x, half_y, sigma_l, int(adaptive))
+        self.accumulate(out)
+        self.weigh(self.n - 1, 1, half_x, half_y, sigma_l, int(adaptive))
         out[3] = self.rho[self.n - 1]
 
-    def propagate(self, seed: int, frame: int, sigma_q: float, velocity: int) -> None:
+    def random_walk(self, seed: int, frame: int, sigma_q: float, velocity: int) -> None:
         """Eq. 1's random walk (or constant velocity), clamped to the frame (see the kernel)."""
         h, w = self.shape
         p = np.arange(self.n)
