@@ -22,6 +22,7 @@ import numpy as np
 import tbd_taichi as tbd
 from tbd_taichi import io, metrics, tables
 from tbd_taichi.background import REAL_VIDEO  # the one configuration for every clip
+from tbd_taichi.plots import write_overlay_gif
 
 ROOT = Path(__file__).resolve().parent.parent
 LOCAL_SNR = {"IR_DRONE_152": 1.5, "IR_HELICOPTER_015": 1.9, "IR_AIRPLANE_027": 3.1, "IR_HELICOPTER_049": 3.8,
@@ -47,28 +48,9 @@ def score_clip(video: Path, labels: Path, n_frames: int | None = None, **tracker
 
 
 def write_gif(video: Path, tracks: np.ndarray, labels: Path, out: Path, frames: int = 120, step: int = 2) -> None:
-    """A small GIF: every ``step``-th frame of the first ``frames``, label box green, tracks red."""
-    import cv2
-    from PIL import Image
-
-    boxes = {int(b["frame"]): b for b in tables.read_boxes(labels)}
-    images = []
-    for f, frame in enumerate(io.iter_frames(io.open_frames(video))):
-        if f >= frames:
-            break
-        if f % step:
-            continue
-        img = cv2.cvtColor(cv2.normalize(frame.astype(np.float32), None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8),
-                           cv2.COLOR_GRAY2RGB)
-        if f in boxes:
-            b = boxes[f]
-            cv2.rectangle(img, (int(b["x"]) - 2, int(b["y"]) - 2), (int(b["x"] + b["w"]) + 2, int(b["y"] + b["h"]) + 2),
-                          (0, 200, 0), 1)
-        for row in tracks[tracks["frame"] == f]:
-            cv2.circle(img, (int(round(row["x"])), int(round(row["y"]))), 6, (255, 40, 40), 1)
-        cv2.putText(img, f"{f}", (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
-        images.append(Image.fromarray(img[::2, ::2]))
-    images[0].save(out, save_all=True, append_images=images[1:], duration=66, loop=0, optimize=True)
+    """A small GIF: every ``step``-th frame of the first ``frames``, label box green, tracks in their colours."""
+    write_overlay_gif(io.iter_frames(io.open_frames(video)), tracks, out, truth=tables.read_boxes(labels),
+                      limit=frames, step=step, scale=2)
 
 
 def main() -> None:

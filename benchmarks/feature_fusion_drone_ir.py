@@ -1,9 +1,10 @@
 """feature-fusion (Huo 2022) on the drone-ir clips, the paper's protocol: each clip from its first labelled box,
 CLE, DP@20 (and @5), mean IoU, AUC and fps, the mean over clips; beside the grey-only and plain-residual
-ablations and a box left at the start; then the huo2022 scenario's sequences.  Writes
-docs/results/feature-fusion.md and its precision/success plot.
+ablations and a box left at the start; then the huo2022 scenario's sequences and the weak and complex 2 × 2
+targets' contrast sweep.  Writes docs/results/feature-fusion.md, the mean precision/success plot (Huo's Fig. 7),
+the same per clip and sequence, and an overlay GIF of one clip.
 
-    python benchmarks/feature_fusion_drone_ir.py [--data ../shared/data/drone-ir] [--out docs/results]
+    python benchmarks/feature_fusion_drone_ir.py [--data ../shared/data/drone-ir] [--out docs/results] [--gif CLIP]
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import numpy as np
 import tbd_taichi as tbd
 from tbd_taichi import io, tables
 from tbd_taichi.otb import otb_scores
-from tbd_taichi.plots import plot_otb_curves
+from tbd_taichi.plots import plot_otb_curves, plot_otb_per_sequence, write_overlay_gif
 
 CONFIGS = {  # label → make_tracker keywords (None: the box left at the start)
     "feature-fusion": {},
@@ -24,12 +25,17 @@ CONFIGS = {  # label → make_tracker keywords (None: the box left at the start)
     "plain residual": {"resampling": "residual"},
     "box left at the start": None,
 }
+GIF_FRAMES, GIF_SIDE = 120, 128  # the GIF: frames shown, side of the square cut around the target (px)
+CONTRASTS = (3.0, 6.0, 10.0, 20.0)  # the sweep's dim_contrast values (noise σ)
+SWEEP_SEEDS = (0, 1, 2)
+SWEEP_CONFIGS = {"default": {}, "σ_q = 2 px": {"sigma_q": 2.0}}
 PAPER = ("| Huo 2022 (Table 2, its six sequences) | 37.4 | 77.2% | – | 27.0% | – | 106 |\n"
          "| PF (Table 2) | 42.9 | 66.2% | – | 15.9% | – | 121 |")
 
 
-def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float]:
-    """The OTB scores of one configuration on one clip and its tracker's frames/s (start-up excluded)."""
+def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float, np.ndarray]:
+    """The OTB scores of one configuration on one clip, its tracker's frames/s (start-up excluded) and its
+    tracks."""
     boxes = tables.read_boxes(labels)
     frames = io.read_frames(video)
     b = boxes[0]
@@ -39,7 +45,7 @@ def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float]:
         rows = [(first + t, 1, b["x"] + b["w"] / 2, b["y"] + b["h"] / 2, b["w"], b["h"]) for t in range(len(seq))]
         tracks = np.array(rows, dtype=[("frame", int), ("track_id", int), ("x", float), ("y", float),
                                        ("w", float), ("h", float)])
-        return otb_scores(tracks, boxes), float("nan")
+        return otb_scores(tracks, boxes), float("nan"), tracks
     tracker = tbd.make_tracker("feature-fusion", seq.shape[1:], init_box=(b["x"], b["y"], b["w"], b["h"]), seed=0,
                                **settings)
     tracker.update(seq[0])
@@ -49,27 +55,53 @@ def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float]:
     fps = (len(seq) - 1) / (time.perf_counter() - start)
     tracks = tracker.finish()
     tracks["frame"] += first
-    return otb_scores(tracks, boxes), fps
+    return otb_scores(tracks, boxes), fps, tracks
 
 
-def huo2022_table() -> list[str]:
-    """feature-fusion and its grey-only ablation on the four huo2022 sequences (200 frames, seed 0)."""
-    from tbd_taichi.huo2022 import SEQUENCES, simulate_huo2022
+def huo_scores(sequence: str, seed: int = 0, dim_contrast: float = 3.0, **settings) -> dict:
+    """OTB scores of feature-fusion with ``settings`` on one huo2022 sequence (200 frames) from its first box."""
+    from tbd_taichi.huo2022 import simulate_huo2022
+
+    sc = simulate_huo2022(sequence, seed=seed, dim_contrast=dim_contrast)
+    b = sc.truth[0]
+    tracks = tbd.track(sc.frames, method="feature-fusion", init_box=(b["x"], b["y"], b["w"], b["h"]), seed=0,
+                       **settings)
+    return otb_scores(tracks, sc.truth)
+
+
+def huo2022_table() -> tuple[list[str], dict]:
+    """feature-fusion and its grey-only ablation on the four huo2022 sequences (200 frames, seed 0): the table's
+    lines and {sequence: {label: scores}} for the per-sequence plots."""
+    from tbd_taichi.huo2022 import SEQUENCES
 
     lines = ["", "The huo2022 scenario (`tbd-taichi simulate --scenario huo2022 --sequence S`, 200 frames, seed 0; "
              "after Huo's Table 1): CLE px, DP@20, mean IoU; fused (grey only).", "",
              "| sequence | CLE px | DP@20 | mean IoU |", "|---|---|---|---|"]
+    per_sequence = {}
     for seq in SEQUENCES:
-        sc = simulate_huo2022(seq, seed=0)
-        b = sc.truth[0]
-        got = []
-        for settings in ({}, {"fusion": "grey"}):
-            tracks = tbd.track(sc.frames, method="feature-fusion", init_box=(b["x"], b["y"], b["w"], b["h"]),
-                               seed=0, **settings)
-            got.append(otb_scores(tracks, sc.truth))
-        f, g = got
+        f, g = huo_scores(seq), huo_scores(seq, fusion="grey")
+        per_sequence[f"huo2022 {seq}"] = {"feature-fusion": f, "grey only": g}
         lines.append(f"| {seq} | {f['cle']:.1f} ({g['cle']:.1f}) | {100 * f['dp20']:.0f}% ({100 * g['dp20']:.0f}%) | "
                      f"{100 * f['mean_iou']:.0f}% ({100 * g['mean_iou']:.0f}%) |")
+    return lines, per_sequence
+
+
+def contrast_sweep() -> list[str]:
+    """The weak and complex 2 × 2 targets at ``CONTRASTS`` (peak, in noise σ), seeds ``SWEEP_SEEDS``: the runs
+    whose target is held (DP@20 ≥ 0.9) and the mean CLE, per configuration."""
+    lines = ["", "Where a 2 × 2 target is held: the weak and complex sequences with the target's peak contrast raised "
+             f"(`simulate_huo2022(..., dim_contrast=C)`, 200 frames, seeds {', '.join(map(str, SWEEP_SEEDS))}); runs "
+             "with DP@20 ≥ 90 % of 3, mean CLE px in brackets.", "",
+             "| sequence | configuration | " + " | ".join(f"{c:g}σ" for c in CONTRASTS) + " |",
+             "|---|---|" + "---|" * len(CONTRASTS)]
+    for seq in ("weak", "complex"):
+        for label, settings in SWEEP_CONFIGS.items():
+            cells = []
+            for c in CONTRASTS:
+                runs = [huo_scores(seq, seed, c, **settings) for seed in SWEEP_SEEDS]
+                held = sum(r["dp20"] >= 0.9 for r in runs)
+                cells.append(f"{held}/{len(runs)} ({np.mean([r['cle'] for r in runs]):.1f})")
+            lines.append(f"| {seq} | {label} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -77,13 +109,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data" / "drone-ir"))
     ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "docs" / "results"))
+    ap.add_argument("--gif", default="IR_BIRD_016", help="clip shown in feature_fusion.gif")
     args = ap.parse_args()
     clips = sorted(Path(args.data).glob("*.mp4"))
     results = {label: {} for label in CONFIGS}
     for clip in clips:
         for label, settings in CONFIGS.items():
             results[label][clip.stem] = run_clip(clip, clip.with_suffix(".csv"), settings)
-        s, fps = results["feature-fusion"][clip.stem]
+        s, fps, _ = results["feature-fusion"][clip.stem]
         print(f"{clip.stem}: CLE {s['cle']:.1f} DP@20 {s['dp20']:.2f} IoU {s['mean_iou']:.2f} {fps:.0f} fps",
               flush=True)
     out = Path(args.out)
@@ -94,31 +127,40 @@ def main() -> None:
              "the 2-core VM, decoding and start-up excluded.", "",
              "| configuration | CLE px | DP@20 | DP@5 | mean IoU (overlap) | AUC | fps |", "|---|---|---|---|---|---|---|"]
     for label, per_clip in results.items():
-        scores = [s for s, _ in per_clip.values()]
-        fps = [f for _, f in per_clip.values() if np.isfinite(f)]
+        scores = [r[0] for r in per_clip.values()]
+        fps = [r[1] for r in per_clip.values() if np.isfinite(r[1])]
         mean = {k: float(np.mean([s[k] for s in scores])) for k in ("cle", "dp20", "dp5", "mean_iou", "auc")}
         lines.append(f"| {label} | {mean['cle']:.1f} | {100 * mean['dp20']:.1f}% | {100 * mean['dp5']:.1f}% | "
-                     f"{100 * mean['mean_iou']:.1f}% | {mean['auc']:.3f} | "
-                     f"{np.mean(fps):.0f} |" if fps else
-                     f"| {label} | {mean['cle']:.1f} | {100 * mean['dp20']:.1f}% | {100 * mean['dp5']:.1f}% | "
-                     f"{100 * mean['mean_iou']:.1f}% | {mean['auc']:.3f} | – |")
+                     f"{100 * mean['mean_iou']:.1f}% | {mean['auc']:.3f} | " + (f"{np.mean(fps):.0f} |" if fps else "– |"))
     lines += [PAPER, "", "Per clip (feature-fusion; box left at the start in brackets):", "",
               "| clip | frames | CLE px | DP@20 | DP@5 | mean IoU | fps |", "|---|---|---|---|---|---|---|"]
     for clip in clips:
-        s, fps = results["feature-fusion"][clip.stem]
-        b, _ = results["box left at the start"][clip.stem]
+        s, fps, _ = results["feature-fusion"][clip.stem]
+        b = results["box left at the start"][clip.stem][0]
         lines.append(f"| {clip.stem} | {s['scored_frames'] + 1} | {s['cle']:.1f} ({b['cle']:.1f}) | "
                      f"{100 * s['dp20']:.0f}% ({100 * b['dp20']:.0f}%) | {100 * s['dp5']:.0f}% ({100 * b['dp5']:.0f}%) | "
                      f"{100 * s['mean_iou']:.0f}% ({100 * b['mean_iou']:.0f}%) | {fps:.0f} |")
-    mean_curves = {label: {"dp_curve": np.mean([s["dp_curve"] for s, _ in per.values()], axis=0).tolist(),
-                           "success_curve": np.mean([s["success_curve"] for s, _ in per.values()], axis=0).tolist(),
-                           "dp20": float(np.mean([s["dp20"] for s, _ in per.values()])),
-                           "auc": float(np.mean([s["auc"] for s, _ in per.values()]))}
+    mean_curves = {label: {"dp_curve": np.mean([r[0]["dp_curve"] for r in per.values()], axis=0).tolist(),
+                           "success_curve": np.mean([r[0]["success_curve"] for r in per.values()], axis=0).tolist()}
                    for label, per in results.items()}
-    lines += huo2022_table()
-    plot = out / "feature_fusion_drone_ir.png"
+    huo_lines, huo_per_sequence = huo2022_table()
+    lines += huo_lines + contrast_sweep()
+    plot, grid, gif = out / "feature_fusion_drone_ir.png", out / "feature_fusion_per_sequence.png", out / "feature_fusion.gif"
     plot_otb_curves(mean_curves, plot, title="drone-ir, mean over 12 clips")
-    lines += ["", f"![precision and success plots]({plot.name})", ""]
+    per_sequence = {clip.stem: {label: per[clip.stem][0] for label, per in results.items()} for clip in clips}
+    plot_otb_per_sequence({**per_sequence, **huo_per_sequence}, grid,
+                          title="Precision and success plots per sequence (Huo 2022's Fig. 7 per sequence)")
+    video = Path(args.data) / f"{args.gif}.mp4"
+    truth = tables.read_boxes(video.with_suffix(".csv"))
+    shown = truth[truth["frame"] < GIF_FRAMES]
+    cx, cy = int(np.mean(shown["x"] + shown["w"] / 2)), int(np.mean(shown["y"] + shown["h"] / 2))
+    x0, y0 = max(cx - GIF_SIDE // 2, 0), max(cy - GIF_SIDE // 2, 0)
+    write_overlay_gif(io.iter_frames(io.open_frames(video)), results["feature-fusion"][args.gif][2], gif,
+                      truth=truth, limit=GIF_FRAMES, step=2, crop=(x0, y0, x0 + GIF_SIDE, y0 + GIF_SIDE))
+    lines += ["", f"![precision and success plots]({plot.name})", "",
+              f"Per clip and per huo2022 sequence: ![per sequence]({grid.name})", "",
+              f"{args.gif}, frames 0–{GIF_FRAMES - 1} (every second, a {GIF_SIDE} px square around the target), feature-fusion's box and trail, the label box in green: "
+              f"![{args.gif}]({gif.name})", ""]
     (out / "feature-fusion.md").write_text("\n".join(lines))
     print(f"-> {out / 'feature-fusion.md'}")
 

@@ -3,7 +3,7 @@ shipped): 256 × 256 frames in 8-bit grey levels, one target with a box per fram
 
 Sequences (``SEQUENCES``; Table 1's characteristics):
 
-* ``weak``: a 2 × 2 target of peak contrast 3σ over a smooth background, slow wandering (data5, data20);
+* ``weak``: a 2 × 2 target of peak contrast 3σ (``dim_contrast``) over a smooth background, slow wandering (data5, data20);
 * ``complex``: a 2 × 2 target among bright clutter blobs of the same contrast on a textured background (data8,
   data19);
 * ``fast``: a 5 × 5 textured target moving fast with sudden jumps and growing from far to near (data16, data18);
@@ -26,17 +26,20 @@ SHAPE = (256, 256)
 SEQUENCES = ("weak", "complex", "fast", "rotating")
 FRAMES = 200
 NOISE = 4.0  # grey levels: the sensor noise σ
+DIM_CONTRAST = 3.0  # the weak and complex 2 × 2 targets' peak contrast, in units of NOISE
 TRUTH_COLUMNS = BOX_COLUMNS + ("target_id",)
 
 
-def check_huo2022(sequence: str, frames) -> None:
-    """A ParameterError for an unknown sequence or a frame count outside [2, 5000]."""
-    from .validate import whole
+def check_huo2022(sequence: str, frames, dim_contrast=DIM_CONTRAST) -> None:
+    """A ParameterError for an unknown sequence, a frame count outside [2, 5000] or a ``dim_contrast`` that is not
+    a finite number > 0."""
+    from .validate import positive, whole
 
     if sequence not in SEQUENCES:
         raise ParameterError(f"sequence (--sequence) must be one of {', '.join(SEQUENCES)}, got {sequence!r}")
     if frames is not None:
         whole("frames (--frames)", frames, 2, 5000)
+    positive("dim_contrast", dim_contrast)
 
 
 def background(rng: np.random.Generator, textured: bool) -> np.ndarray:
@@ -81,11 +84,13 @@ def path(rng: np.random.Generator, n: int, sequence: str) -> np.ndarray:
     return out
 
 
-def simulate_huo2022(sequence: str = "fast", seed: int = 0, frames: int | None = None) -> Scenario:
-    """Frames (T, 256, 256) float32 in grey levels and box truth of ``sequence`` (module docstring)."""
+def simulate_huo2022(sequence: str = "fast", seed: int = 0, frames: int | None = None,
+                     dim_contrast: float = DIM_CONTRAST) -> Scenario:
+    """Frames (T, 256, 256) float32 in grey levels and box truth of ``sequence`` (module docstring);
+    ``dim_contrast``: the weak and complex targets' peak contrast in noise σ (the complex clutter blobs keep 3σ)."""
     from .validate import whole
 
-    check_huo2022(sequence, frames)
+    check_huo2022(sequence, frames, dim_contrast)
     whole("seed", seed, 0)
     n = FRAMES if frames is None else int(frames)
     rng = np.random.default_rng([seed, SEQUENCES.index(sequence)])
@@ -96,7 +101,7 @@ def simulate_huo2022(sequence: str = "fast", seed: int = 0, frames: int | None =
             base[r:r + 2, c:c + 2] += 3 * NOISE
     centres = path(rng, n, sequence)
     texture = rng.uniform(0.6, 1.0, (7, 7))
-    contrast = 3 * NOISE if sequence in ("weak", "complex") else 60.0
+    contrast = float(dim_contrast) * NOISE if sequence in ("weak", "complex") else 60.0
     images = np.empty((n,) + SHAPE, np.float32)
     rows = []
     for t in range(n):

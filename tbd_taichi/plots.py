@@ -1,4 +1,4 @@
-"""Pictures of tracks: a PNG over the max-projection, and an overlay video.
+"""Pictures of tracks: a PNG over the max-projection, an overlay video and an overlay GIF.
 
 Coordinates as everywhere: x = column, y = row, 0-based, pixel centres at integers.
 """
@@ -68,6 +68,46 @@ def plot_otb_curves(results: dict, path, title: str = "") -> None:
     (fraction with IoU > t, t = 0..1), one line per tracker, written to ``path`` (PNG, PDF or SVG by its suffix).
     ``results``: {label: scores with ``dp_curve`` and ``success_curve``, as :func:`tbd_taichi.otb.otb_scores`
     gives them}; the legends carry DP@20 and AUC, OTB's ranking values."""
+    curves, path, plt = _otb_setup(results, path)
+    fig, (pre, suc) = plt.subplots(1, 2, figsize=(11, 4.5))
+    _otb_axes(pre, suc, curves, "precision plot (DP@20 in [])", "success plot (AUC in [])", 8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_otb_per_sequence(per_sequence: dict, path, title: str = "", columns: int = 4) -> None:
+    """Huo 2022's Fig. 7 per sequence: for each sequence its precision plot beside its success plot (as
+    :func:`plot_otb_curves`), ``columns`` sequences a row.  ``per_sequence``: {sequence: {label: OTB scores}}."""
+    from .errors import ParameterError
+
+    if not isinstance(per_sequence, dict) or not per_sequence:
+        raise ParameterError("per_sequence must be a non-empty dict {sequence: {label: OTB scores}}")
+    checked = {}
+    for name, results in per_sequence.items():
+        checked[name], path, plt = _otb_setup(results, path)
+    rows = -(-len(checked) // columns)
+    fig, axes = plt.subplots(rows, 2 * columns, figsize=(5.0 * columns, 2.8 * rows), squeeze=False)
+    for i, (name, curves) in enumerate(checked.items()):
+        pre, suc = axes[i // columns, 2 * (i % columns)], axes[i // columns, 2 * (i % columns) + 1]
+        _otb_axes(pre, suc, curves, f"{name} (precision)", "(success)", 5)
+        for ax in (pre, suc):
+            ax.title.set_fontsize(8)
+            ax.xaxis.label.set_fontsize(7)
+            ax.yaxis.label.set_fontsize(7)
+    for ax in axes.flat[2 * len(checked):]:
+        ax.axis("off")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _otb_setup(results, path):
+    """({label: (dp_curve, success_curve)} checked, the checked output path, pyplot on the Agg backend)."""
     from .errors import ParameterError
     from .otb import DP_THRESHOLDS, SUCCESS_THRESHOLDS
     from .validate import output_path
@@ -90,32 +130,54 @@ def plot_otb_curves(results: dict, path, title: str = "") -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (pre, suc) = plt.subplots(1, 2, figsize=(11, 4.5))
+    return curves, path, plt
+
+
+def _otb_axes(pre, suc, curves: dict, pre_title: str, suc_title: str, fontsize: int) -> None:
+    """One precision plot (``pre``) and one success plot (``suc``), legends with DP@20 and AUC."""
+    from .otb import DP_THRESHOLDS, SUCCESS_THRESHOLDS
+
     for label, (dp, success) in curves.items():
         pre.plot(DP_THRESHOLDS, dp, lw=2, label=f"{label} [{dp[20]:.3f}]")
         suc.plot(SUCCESS_THRESHOLDS, success, lw=2, label=f"{label} [{success.mean():.3f}]")
-    pre.set(xlabel="location error threshold (px)", ylabel="precision", title="precision plot (DP@20 in [])",
+    pre.set(xlabel="location error threshold (px)", ylabel="precision", title=pre_title,
             xlim=(0, DP_THRESHOLDS[-1]), ylim=(0, 1.02))
-    suc.set(xlabel="overlap threshold", ylabel="success rate", title="success plot (AUC in [])", xlim=(0, 1),
-            ylim=(0, 1.02))
+    suc.set(xlabel="overlap threshold", ylabel="success rate", title=suc_title, xlim=(0, 1), ylim=(0, 1.02))
     for ax in (pre, suc):
         ax.grid(alpha=0.3)
-        ax.legend(loc="lower right" if ax is pre else "lower left", fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+        ax.legend(loc="lower right" if ax is pre else "lower left", fontsize=fontsize)
+
+
+def _rows_by_frame(tracks: np.ndarray) -> dict[int, np.ndarray]:
+    return {int(f): tracks[tracks["frame"] == f] for f in np.unique(tracks["frame"])}
+
+
+def draw_overlay(img: np.ndarray, tracks: np.ndarray, rows: np.ndarray, f: int, truth=None) -> np.ndarray:
+    """Draw on the BGR image ``img`` of frame ``f``: the label box ``truth`` (a row with x, y = top-left corner,
+    w, h; green) and each track row in ``rows`` with its box (its w × h for box trackers, else a fixed marker),
+    id and trail over the last :data:`TRAIL` frames of ``tracks``; returns ``img``."""
+    if truth is not None:
+        x0, y0 = int(round(truth["x"])), int(round(truth["y"]))
+        cv2.rectangle(img, (x0, y0), (int(round(truth["x"] + truth["w"])), int(round(truth["y"] + truth["h"]))),
+                      (0, 200, 0), 1)
+    for row in rows:
+        tid, colour = int(row["track_id"]), track_colour(row["track_id"])
+        trail = tracks[(tracks["track_id"] == tid) & (tracks["frame"] <= f) & (tracks["frame"] > f - TRAIL)]
+        pts = np.stack([trail["x"], trail["y"]], axis=1).round().astype(np.int32)
+        cv2.polylines(img, [pts], False, colour, 1)
+        x, y = int(round(row["x"])), int(round(row["y"]))
+        bw, bh = (int(round(row["w"] / 2)), int(round(row["h"] / 2))) if "w" in tracks.dtype.names else (BOX, BOX)
+        cv2.rectangle(img, (x - bw, y - bh), (x + bw, y + bh), colour, 1)
+        cv2.putText(img, str(tid), (x + bw + 1, y - bh), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
+    return img
 
 
 def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> int:
-    """Video of ``frames`` (an iterable of float (H, W)) with each track's box (its w × h for box trackers, else a
-    fixed marker), id and trail; returns frames written."""
+    """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail (:func:`draw_overlay`);
+    returns frames written."""
     path = Path(path)
     writer = None
-    by_frame: dict[int, np.ndarray] = {}
-    for f in np.unique(tracks["frame"]):
-        by_frame[int(f)] = tracks[tracks["frame"] == f]
+    by_frame = _rows_by_frame(tracks)
     n = 0
     for f, frame in enumerate(frames):
         lo, hi = np.percentile(frame, (1, 99.9))
@@ -125,17 +187,34 @@ def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> 
             writer = cv2.VideoWriter(str(path), fourcc, fps, (img.shape[1], img.shape[0]))
             if not writer.isOpened():
                 raise InputError(f"{path}: OpenCV cannot write a video of this type; use .mp4 or .avi")
-        for row in by_frame.get(f, ()):
-            tid, colour = int(row["track_id"]), track_colour(row["track_id"])
-            trail = tracks[(tracks["track_id"] == tid) & (tracks["frame"] <= f) & (tracks["frame"] > f - TRAIL)]
-            pts = np.stack([trail["x"], trail["y"]], axis=1).round().astype(np.int32)
-            cv2.polylines(img, [pts], False, colour, 1)
-            x, y = int(round(row["x"])), int(round(row["y"]))
-            bw, bh = (int(round(row["w"] / 2)), int(round(row["h"] / 2))) if "w" in tracks.dtype.names else (BOX, BOX)
-            cv2.rectangle(img, (x - bw, y - bh), (x + bw, y + bh), colour, 1)
-            cv2.putText(img, str(tid), (x + bw + 1, y - bh), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
-        writer.write(img)
+        writer.write(draw_overlay(img, tracks, by_frame.get(f, tracks[:0]), f))
         n += 1
     if writer is not None:
         writer.release()
     return n
+
+
+def write_overlay_gif(frames, tracks: np.ndarray, path, truth: np.ndarray | None = None, limit: int = 120,
+                      step: int = 2, scale: int = 1, crop=None, ms_per_frame: int = 66) -> int:
+    """A looping GIF (for the docs) of every ``step``-th of the first ``limit`` ``frames`` with the tracks and the
+    label boxes ``truth`` (rows frame, x, y, w, h) drawn by :func:`draw_overlay` and the frame number; ``crop``
+    (column 0, row 0, column 1, row 1) keeps that part of each frame; ``scale`` > 1 shrinks by that factor.
+    Returns the frames written."""
+    from PIL import Image
+
+    by_frame, boxes = _rows_by_frame(tracks), {} if truth is None else {int(b["frame"]): b for b in truth}
+    images = []
+    for f, frame in enumerate(frames):
+        if f >= limit:
+            break
+        if f % step:
+            continue
+        lo, hi = np.percentile(frame, (1, 99.9))
+        img = draw_overlay(to_display(frame, lo, hi), tracks, by_frame.get(f, tracks[:0]), f, boxes.get(f))
+        if crop is not None:
+            img = np.ascontiguousarray(img[crop[1]:crop[3], crop[0]:crop[2]])
+        cv2.putText(img, str(f), (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 255, 255), 1)
+        images.append(Image.fromarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB)[::scale, ::scale]))
+    if images:
+        images[0].save(path, save_all=True, append_images=images[1:], duration=ms_per_frame, loop=0, optimize=True)
+    return len(images)

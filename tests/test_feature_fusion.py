@@ -94,6 +94,35 @@ def test_histograms_likelihood_and_fusion_agree_with_the_twin(rng):
     assert np.all(pools[0].get("rho") <= 1 + 1e-5)
 
 
+@pytest.mark.parametrize("velocity", [0, 1])
+def test_one_launch_step_is_the_twins_serial_or_parallel(rng, velocity):
+    """``step`` (Eq. 1, Eqs. 11–22, Eqs. 10, 6, 23, then the estimate weighed) gives the twin's state, weights and
+    (x̂, ŷ, N_eff, ρ) in its serial and its parallel form, for three frames in a row."""
+    shape, n = (33, 41), 65  # 64 particles and the estimate's slot
+    frame = rng.uniform(0, 255, shape).astype(np.float32)
+    pools, _, _ = make_pools(shape, n=n)
+    state = np.zeros((n, 4), np.float32)
+    state[:, 0], state[:, 1] = rng.uniform(0, 40, n), rng.uniform(0, 32, n)
+    load_pools(pools, frame, state)
+    pools[0].weigh(0, 1, 3.5, 2.5, 0.15, 1)
+    template = pools[0].get("hist")[0]
+    outs = []
+    for k, serial in ((pools[0], True), (pools[0], False), (pools[1], False)):
+        k.put("template", template)
+        k.put("state", state)
+        k.put("logw", np.zeros(n))
+        k.configure(2.0, velocity, 3.5, 2.5, 0.15, 1)
+        out = np.zeros(4)
+        for f in (1, 2, 3):
+            k.step(7, f, out, serial)
+        outs.append((k.get("state"), k.get("logw"), out.copy()))
+    for got in outs[1:]:
+        for a, b, name in zip(outs[0], got, ("state", "logw", "out")):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5, err_msg=name)
+    assert 1 <= outs[0][2][2] <= n - 1 and 0 < outs[0][2][3] <= 1 + 1e-5  # N_eff, ρ at the estimate
+    assert tk.serial_step(200, 4.5, 4.5) and not tk.serial_step(2000, 4.5, 4.5)
+
+
 def test_histogram_by_hand_on_a_tiny_window():
     """A 3×3 window (half 1.5 × 1.5, s² = 4.5) on a two-level image: k = 1 − r²/s² per pixel, normalised."""
     shape = (9, 9)

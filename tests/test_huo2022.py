@@ -44,6 +44,24 @@ def test_feature_fusion_holds_the_target(sequence):
     assert scores["cle"] < 3 and scores["dp20"] > 0.95, scores
 
 
+@pytest.mark.parametrize("contrast, held", [(20.0, True), (3.0, False)])
+def test_a_2x2_target_is_held_when_bright_and_lost_when_dim(contrast, held):
+    """Where the histogram tracker's limit lies (docs/methods/feature-fusion.md): the weak sequence's 2 × 2 target
+    at 20σ peak contrast is held (measured CLE 0.4 px on seed 0), at the default 3σ it is lost (53.8 px)."""
+    sc = simulate_huo2022("weak", seed=0, frames=120, dim_contrast=contrast)
+    assert sc.params["contrast"] == pytest.approx(contrast * 4.0)
+    b = sc.truth[0]
+    tracks = tbd.track(sc.frames, method="feature-fusion", init_box=(b["x"], b["y"], b["w"], b["h"]), seed=0)
+    scores = otb_scores(tracks, sc.truth)
+    assert (scores["cle"] < 3 and scores["dp20"] > 0.95) if held else scores["dp20"] < 0.6, scores
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("nan"), "3"])
+def test_dim_contrast_must_be_positive(bad):
+    with pytest.raises(ParameterError, match="dim_contrast"):
+        simulate_huo2022("weak", frames=5, dim_contrast=bad)
+
+
 def test_simulate_cli_writes_frames_and_box_truth(tmp_path, capsys):
     out = tmp_path / "h.npz"
     assert cli.main(["simulate", "--scenario", "huo2022", "--sequence", "rotating", "--frames", "5",

@@ -187,3 +187,37 @@ def test_plot_otb_curves_writes_a_png(tmp_path):
         plot_otb_curves({"bad": {"dp_curve": [1.0]}}, tmp_path / "x.png")
     with pytest.raises(ParameterError, match="non-empty dict"):
         plot_otb_curves({}, tmp_path / "x.png")
+
+
+def test_plot_otb_per_sequence_writes_one_grid_and_checks_every_sequence(tmp_path):
+    from tbd_taichi.plots import plot_otb_per_sequence
+
+    boxes = make_boxes()
+    results = {"perfect": otb_scores(tracks_on(boxes), boxes), "shifted": otb_scores(tracks_on(boxes, dx=10), boxes)}
+    plot_otb_per_sequence({"a": results, "b": results, "c": results}, tmp_path / "grid.png", columns=2)
+    assert (tmp_path / "grid.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ParameterError, match="results\\['bad'\\] needs dp_curve"):
+        plot_otb_per_sequence({"a": results, "b": {"bad": {}}}, tmp_path / "x.png")
+    with pytest.raises(ParameterError, match="non-empty dict"):
+        plot_otb_per_sequence({}, tmp_path / "x.png")
+
+
+def test_overlay_gif_draws_the_boxes_on_the_kept_frames(tmp_path):
+    """Every second of the first 6 frames, cropped to 40×30 px: the track's box (its colour) and the label box
+    (green) are drawn where the rows say."""
+    from PIL import Image
+
+    from tbd_taichi.plots import track_colour, write_overlay_gif
+
+    boxes = make_boxes(n=8)
+    frames = [np.zeros((60, 80), np.float32) for _ in range(8)]
+    n = write_overlay_gif(frames, tracks_on(boxes, dx=4), tmp_path / "o.gif", truth=boxes, limit=6, step=2,
+                          crop=(0, 0, 40, 30))
+    gif = Image.open(tmp_path / "o.gif")
+    assert n == 3 and gif.n_frames == 3 and gif.size == (40, 30)
+    first = np.asarray(gif.convert("RGB"))
+    b = boxes[0]  # label box: x 5..25, y 8..28 → its left edge at column 5
+    assert tuple(first[15, 5]) == (0, 200, 0)
+    bgr = track_colour(1)  # the track's box: centre (15 + 4, 18), 20×20 → left edge at column 9
+    assert tuple(first[18, 9]) == (bgr[2], bgr[1], bgr[0])
+    assert b["frame"] == 0
