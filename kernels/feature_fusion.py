@@ -24,8 +24,9 @@ from .rng import NormalTables, key_prefix, normal_at
 
 FEATURES = 3  # grey, edge, Gabor
 S_X, S_Y = 0, 1  # random-walk streams
+FUSIONS = ("grey", "adaptive", "bin-sum")  # the fusion modes' codes are their indices (weigh_range)
 SERIAL_WORK = 50_000  # particle-pixels: below this, step() runs its particle loops in one thread (serial_step)
-CONFIG = ("sigma_q", "velocity", "half_x", "half_y", "sigma_l", "adaptive")  # step()'s constants, in this order
+CONFIG = ("sigma_q", "velocity", "half_x", "half_y", "sigma_l", "fusion")  # step()'s constants, in this order
 MAX_HALF = 64  # px: the largest half window (a box of 129 px)
 SOBEL = (
     ((1, 2, 1), (0, 0, 0), (-1, -2, -1)),  # S_x
@@ -124,15 +125,18 @@ class FeatureFusionKernels:
     # ------------------------------------------------------------------ Eqs. 11–13, 19–22: one launch, all particles
 
     @ti.kernel
-    def weigh(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32, adaptive: ti.i32):
+    def weigh(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32, fusion: ti.i32):
         """:meth:`weigh_range` with these constants (frame 0's template, tests)."""
-        self.weigh_range(first, count, half_x, half_y, sigma_l, adaptive)
+        self.weigh_range(first, count, half_x, half_y, sigma_l, fusion)
 
     @ti.func
     def weigh_range(self, first: ti.i32, count: ti.i32, half_x: ti.f32, half_y: ti.f32, sigma_l: ti.f32,
-                    adaptive: ti.i32):
-        """Particles [first, first + count): histograms (Eqs. 11–13), c_i (Eq. 19), v_i (Eq. 20; ``adaptive`` = 0:
-        grey only, v = (1, 0, 0)), ρ = Σ v_i ρ_i (Eqs. 21–22) and loglik = −(1 − ρ)/(2σ_L²)."""
+                    fusion: ti.i32):
+        """Particles [first, first + count): histograms (Eqs. 11–13), c_i (Eq. 19), v_i (Eq. 20) and ρ by
+        ``fusion`` (an index of ``FUSIONS``): 0, the grey histogram alone (v = (1, 0, 0)); 1, ρ = Σ v_i ρ_i, the
+        v-weighted concatenation (Eqs. 21–22); 2, Eq. 21 as printed, the bin-wise sums F = Σ v_i f_i of the
+        template and the candidate (the candidate's v on both sides) and ρ = Σ_b √(F_t F_c); then
+        loglik = −(1 − ρ)/(2σ_L²)."""
         h, w = ti.static(self.shape)
         for p in range(first, first + count):
             x, y = self.state[p, 0], self.state[p, 1]
@@ -160,9 +164,17 @@ class FeatureFusionKernels:
                 cs[f] = self.pearson(p, f)
                 rhos[f] = self.bhattacharyya(p, f)
             v = ti.Vector([1.0, 0.0, 0.0], dt=ti.f32)
-            if adaptive != 0:
+            if fusion != 0:
                 v = (cs + 1.0) / ti.max((cs + 1.0).sum(), 1e-12)  # Eq. 20 (the 0.5 cancels)
             rho = v.dot(rhos)
+            if fusion == 2:  # Eq. 21's bin-wise sum
+                rho = 0.0
+                for b in range(self.bins):
+                    ft, fc = ti.f32(0.0), ti.f32(0.0)
+                    for f in ti.static(range(FEATURES)):
+                        ft += v[f] * self.template[f, b]
+                        fc += v[f] * self.hist[p, f, b]
+                    rho += ti.sqrt(ft * fc)
             for f in ti.static(range(FEATURES)):
                 self.fusion[p, f] = v[f]
             self.rho[p] = rho
@@ -216,18 +228,18 @@ class FeatureFusionKernels:
         N_eff, ρ at x̂)."""
         sigma_q, velocity = self.config[0], ti.cast(self.config[1], ti.i32)
         half_x, half_y, sigma_l = self.config[2], self.config[3], self.config[4]
-        adaptive = ti.cast(self.config[5], ti.i32)
+        fusion = ti.cast(self.config[5], ti.i32)
         self.random_walk(seed, frame, sigma_q, velocity)
-        self.weigh_range(0, self.n - 1, half_x, half_y, sigma_l, adaptive)
+        self.weigh_range(0, self.n - 1, half_x, half_y, sigma_l, fusion)
         self.accumulate(out)
-        self.weigh_range(self.n - 1, 1, half_x, half_y, sigma_l, adaptive)
+        self.weigh_range(self.n - 1, 1, half_x, half_y, sigma_l, fusion)
         out[3] = ti.cast(self.rho[self.n - 1], ti.f64)
 
     def configure(self, sigma_q: float, velocity: int, half_x: float, half_y: float, sigma_l: float,
-                  adaptive: int) -> None:
+                  fusion: int) -> None:
         """:meth:`step`'s constants (``CONFIG``): σ_q (px), constant velocity (0/1), the half window H_x, H_y
-        (px), σ_L and adaptive fusion (0/1)."""
-        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, adaptive])
+        (px), σ_L and the fusion mode (an index of ``FUSIONS``)."""
+        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, fusion])
 
     @ti.func
     def accumulate(self, out: ti.template()):

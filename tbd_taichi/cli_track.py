@@ -71,7 +71,7 @@ def add_track_parser(sub, common) -> None:
                          "(frame,x,y,w,h[,target_id]: detection rate, false points per frame, centre error, IoU)")
     tr.add_argument("--box-margin", type=number(validate.positive, 0.0, True), default=metrics.BOX_MARGIN,
                     help="with box truth: a hit is a track point inside the box grown by this, px (default 2)")
-    tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail (.mp4 or .avi)")
+    tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail, and the --truth boxes or points in green (.mp4 or .avi)")
     tr.add_argument("--fps", type=number(validate.positive), default=None,
                     help="the overlay video's frame rate (default: the input video's, else 15)")
     tr.add_argument("--plot", default=None,
@@ -403,7 +403,8 @@ def execute_track(plan: TrackPlan, args, say) -> dict:
         from .plots import write_overlay_video
 
         fps = args.fps or plan.source.fps or FALLBACK_FPS
-        n = write_overlay_video(io.iter_frames(plan.source), tracks, plan.outputs["video"], fps=fps)
+        n = write_overlay_video(io.iter_frames(plan.source), tracks, plan.outputs["video"], fps=fps,
+                                truth=plan.truth and plan.truth[1])
         say(f"video ({n} frames, {fps:g} fps) -> {plan.outputs['video']}")
     wall = seconds_since_start()
     summary = dict(method=args.method, input=str(args.input), out=str(plan.out), frames=frames, tracks=n_tracks,

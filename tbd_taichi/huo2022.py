@@ -7,7 +7,9 @@ Sequences (``SEQUENCES``; Table 1's characteristics):
 * ``complex``: a 2 × 2 target among bright clutter blobs of the same contrast on a textured background (data8,
   data19);
 * ``fast``: a 5 × 5 textured target moving fast with sudden jumps and growing from far to near (data16, data18);
-* ``rotating``: an elongated 5 × 3 target that rotates as it moves (data20's rotation).
+* ``rotating``: an elongated 5 × 3 target that rotates as it moves, while the background changes from sky to
+  terrain (data20's rotation and its Fig. 6 change "from sky to mountain"): from 40 % of the frames on, a brighter
+  textured ground rises from the bottom edge to row 60 (``horizon``).
 
 Truth: ``frame,x,y,w,h,target_id`` with x, y the box's top-left corner (as drone-ir's labels), w, h its size; the
 box centre (x + w/2, y + h/2) is the target's centre."""
@@ -65,6 +67,22 @@ def target_patch(size: tuple[int, int], angle: float, rng_texture: np.ndarray) -
     return (inside * tex).reshape(side, 4, side, 4).mean(axis=(1, 3))
 
 
+def terrain(rng: np.random.Generator) -> np.ndarray:
+    """The ground that rises into the ``rotating`` sequence: brighter than the sky (about 125 grey levels) with
+    fine texture of sd 15."""
+    fine = ndimage.gaussian_filter(rng.standard_normal(SHAPE), 1.5, mode="reflect")
+    relief = ndimage.gaussian_filter(rng.standard_normal(SHAPE), 12, mode="reflect")
+    return 125 + 15 * fine / fine.std() + 10 * relief / relief.std()
+
+
+def horizon(t: int, n: int) -> float:
+    """The row where the ground starts in frame t of n (below the image until 40 % of the frames, then rising
+    linearly to row 60 at the last frame)."""
+    start, top = SHAPE[0] + 4.0, 60.0
+    share = min(max((t - 0.4 * n) / max(0.6 * n - 1, 1), 0.0), 1.0)
+    return start - share * (start - top)
+
+
 def path(rng: np.random.Generator, n: int, sequence: str) -> np.ndarray:
     """(n, 2) target centres (x, y): a smooth wander, fast with jumps for ``fast``."""
     speed = 3.0 if sequence == "fast" else 0.8
@@ -101,6 +119,8 @@ def simulate_huo2022(sequence: str = "fast", seed: int = 0, frames: int | None =
             base[r:r + 2, c:c + 2] += 3 * NOISE
     centres = path(rng, n, sequence)
     texture = rng.uniform(0.6, 1.0, (7, 7))
+    ground = terrain(rng) if sequence == "rotating" else None
+    rows_of = np.arange(SHAPE[0], dtype=float)[:, None]
     contrast = float(dim_contrast) * NOISE if sequence in ("weak", "complex") else 60.0
     images = np.empty((n,) + SHAPE, np.float32)
     rows = []
@@ -114,6 +134,9 @@ def simulate_huo2022(sequence: str = "fast", seed: int = 0, frames: int | None =
             size, angle = (2, 2), 0.0
         patch = contrast * target_patch(size, angle, texture)
         frame = base + rng.normal(0, NOISE, SHAPE)
+        if ground is not None:  # sky above the horizon, ground below (a 3 px soft edge)
+            share = np.clip((rows_of - horizon(t, n)) / 3.0 + 0.5, 0.0, 1.0)
+            frame = frame + share * (ground - base)
         x, y = centres[t]
         half = patch.shape[0] / 2
         r0, c0 = int(round(y - half)), int(round(x - half))

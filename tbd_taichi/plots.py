@@ -13,6 +13,7 @@ from .errors import InputError
 
 TRAIL = 30  # frames of trail drawn behind each track in the video
 BOX = 6  # half-size of the box around a track, px
+TRUTH_BGR = (0, 200, 0)  # truth is drawn in green
 LEGEND_TRACKS = 8  # the plot's legend names the longest tracks only; every track's id is written beside its trail
 
 
@@ -148,18 +149,24 @@ def _otb_axes(pre, suc, curves: dict, pre_title: str, suc_title: str, fontsize: 
         ax.legend(loc="lower right" if ax is pre else "lower left", fontsize=fontsize)
 
 
-def _rows_by_frame(tracks: np.ndarray) -> dict[int, np.ndarray]:
-    return {int(f): tracks[tracks["frame"] == f] for f in np.unique(tracks["frame"])}
+def _rows_by_frame(table: np.ndarray | None) -> dict[int, np.ndarray]:
+    """{frame: the rows of ``table`` in it} ({} for None)."""
+    if table is None:
+        return {}
+    return {int(f): table[table["frame"] == f] for f in np.unique(table["frame"])}
 
 
-def draw_overlay(img: np.ndarray, tracks: np.ndarray, rows: np.ndarray, f: int, truth=None) -> np.ndarray:
-    """Draw on the BGR image ``img`` of frame ``f``: the label box ``truth`` (a row with x, y = top-left corner,
-    w, h; green) and each track row in ``rows`` with its box (its w × h for box trackers, else a fixed marker),
-    id and trail over the last :data:`TRAIL` frames of ``tracks``; returns ``img``."""
-    if truth is not None:
-        x0, y0 = int(round(truth["x"])), int(round(truth["y"]))
-        cv2.rectangle(img, (x0, y0), (int(round(truth["x"] + truth["w"])), int(round(truth["y"] + truth["h"]))),
-                      (0, 200, 0), 1)
+def draw_overlay(img: np.ndarray, tracks: np.ndarray, rows: np.ndarray, f: int, truth=()) -> np.ndarray:
+    """Draw on the BGR image ``img`` of frame ``f``: the ``truth`` rows in green (a box where they have w, h, with
+    x, y its top-left corner; else a circle at the point x, y) and each track row in ``rows`` with its box (its
+    w × h for box trackers, else a fixed marker), id and trail over the last :data:`TRAIL` frames of ``tracks``;
+    returns ``img``."""
+    for t in truth:
+        x0, y0 = int(round(t["x"])), int(round(t["y"]))
+        if "w" in t.dtype.names:
+            cv2.rectangle(img, (x0, y0), (int(round(t["x"] + t["w"])), int(round(t["y"] + t["h"]))), TRUTH_BGR, 1)
+        else:
+            cv2.circle(img, (x0, y0), BOX + 2, TRUTH_BGR, 1)
     for row in rows:
         tid, colour = int(row["track_id"]), track_colour(row["track_id"])
         trail = tracks[(tracks["track_id"] == tid) & (tracks["frame"] <= f) & (tracks["frame"] > f - TRAIL)]
@@ -172,12 +179,12 @@ def draw_overlay(img: np.ndarray, tracks: np.ndarray, rows: np.ndarray, f: int, 
     return img
 
 
-def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> int:
-    """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail (:func:`draw_overlay`);
-    returns frames written."""
+def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0, truth: np.ndarray | None = None) -> int:
+    """Video of ``frames`` (an iterable of float (H, W)) with each track's box, id and trail and the ``truth`` rows
+    (boxes or points) in green (:func:`draw_overlay`); returns frames written."""
     path = Path(path)
     writer = None
-    by_frame = _rows_by_frame(tracks)
+    by_frame, truth_by_frame = _rows_by_frame(tracks), _rows_by_frame(truth)
     n = 0
     for f, frame in enumerate(frames):
         lo, hi = np.percentile(frame, (1, 99.9))
@@ -187,7 +194,7 @@ def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> 
             writer = cv2.VideoWriter(str(path), fourcc, fps, (img.shape[1], img.shape[0]))
             if not writer.isOpened():
                 raise InputError(f"{path}: OpenCV cannot write a video of this type; use .mp4 or .avi")
-        writer.write(draw_overlay(img, tracks, by_frame.get(f, tracks[:0]), f))
+        writer.write(draw_overlay(img, tracks, by_frame.get(f, ()), f, truth_by_frame.get(f, ())))
         n += 1
     if writer is not None:
         writer.release()
@@ -197,12 +204,12 @@ def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0) -> 
 def write_overlay_gif(frames, tracks: np.ndarray, path, truth: np.ndarray | None = None, limit: int = 120,
                       step: int = 2, scale: int = 1, crop=None, ms_per_frame: int = 66) -> int:
     """A looping GIF (for the docs) of every ``step``-th of the first ``limit`` ``frames`` with the tracks and the
-    label boxes ``truth`` (rows frame, x, y, w, h) drawn by :func:`draw_overlay` and the frame number; ``crop``
+    ``truth`` rows (label boxes frame, x, y, w, h, or points) drawn by :func:`draw_overlay` and the frame number; ``crop``
     (column 0, row 0, column 1, row 1) keeps that part of each frame; ``scale`` > 1 shrinks by that factor.
     Returns the frames written."""
     from PIL import Image
 
-    by_frame, boxes = _rows_by_frame(tracks), {} if truth is None else {int(b["frame"]): b for b in truth}
+    by_frame, truth_by_frame = _rows_by_frame(tracks), _rows_by_frame(truth)
     images = []
     for f, frame in enumerate(frames):
         if f >= limit:
@@ -210,7 +217,7 @@ def write_overlay_gif(frames, tracks: np.ndarray, path, truth: np.ndarray | None
         if f % step:
             continue
         lo, hi = np.percentile(frame, (1, 99.9))
-        img = draw_overlay(to_display(frame, lo, hi), tracks, by_frame.get(f, tracks[:0]), f, boxes.get(f))
+        img = draw_overlay(to_display(frame, lo, hi), tracks, by_frame.get(f, ()), f, truth_by_frame.get(f, ()))
         if crop is not None:
             img = np.ascontiguousarray(img[crop[1]:crop[3], crop[0]:crop[2]])
         cv2.putText(img, str(f), (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 255, 255), 1)

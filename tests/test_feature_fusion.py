@@ -73,17 +73,23 @@ def load_pools(pools, frame, state):
     return raw
 
 
-def test_histograms_likelihood_and_fusion_agree_with_the_twin(rng):
+@pytest.mark.parametrize("fusion", ["adaptive", "bin-sum"])
+def test_histograms_likelihood_and_fusion_agree_with_the_twin(rng, fusion):
     shape = (33, 41)
     frame = rng.uniform(0, 255, shape).astype(np.float32)
     pools, _, _ = make_pools(shape, n=64)
     state = np.zeros((64, 4), np.float32)
     state[:, 0], state[:, 1] = rng.uniform(-1, 41, 64), rng.uniform(-1, 33, 64)  # some at the borders
     load_pools(pools, frame, state)
+    mode = tk.FUSIONS.index(fusion)
     for k in pools:
-        k.weigh(0, 1, 3.5, 2.5, 0.15, 1)  # slot 0's histograms become the template
+        k.weigh(0, 1, 3.5, 2.5, 0.15, mode)  # slot 0's histograms become the template
         k.put("template", k.get("hist")[0])
-        k.weigh(0, 64, 3.5, 2.5, 0.15, 1)
+        k.weigh(0, 64, 3.5, 2.5, 0.15, mode)
+    if fusion == "bin-sum":  # Eq. 21 as printed: ρ = Σ_b √(F_t F_c), F = Σ_i v_i f_i with the candidate's v
+        v, t, hist = pools[0].get("fusion"), pools[0].get("template"), pools[0].get("hist")
+        ref = np.sqrt(np.einsum("pf,fb->pb", v, t) * np.einsum("pf,pfb->pb", v, hist)).sum(axis=1)
+        np.testing.assert_allclose(pools[0].get("rho"), ref, rtol=1e-5, atol=1e-6)
     for name in ("hist", "rho", "loglik", "fusion"):
         np.testing.assert_allclose(pools[0].get(name), pools[1].get(name), rtol=1e-4, atol=1e-5, err_msg=name)
     hist = pools[0].get("hist")
@@ -188,6 +194,26 @@ def test_engines_follow_the_same_target(clip):
     out = [tbd.track(frames[:20], method="feature-fusion", init_box=(b["x"], b["y"], b["w"], b["h"]), engine=e)
            for e in ("taichi", "numpy")]
     assert np.max(np.hypot(out[0]["x"] - out[1]["x"], out[0]["y"] - out[1]["y"])) < 1.0
+
+
+@pytest.mark.parametrize("settings", [{"grey_range": "8-bit"}, {"fusion": "bin-sum"}])
+def test_the_alternatives_run_on_both_engines(clip, settings):
+    """The ambiguities' alternatives kept as parameters: the grey bins over [0, 256) and Eq. 21's bin-wise sum."""
+    from tbd_taichi.methods.feature_fusion import EIGHT_BIT, FeatureFusionTracker
+
+    frames, boxes = clip
+    b = boxes[0]
+    out = []
+    for engine in ("taichi", "numpy"):
+        tracker = FeatureFusionTracker(frames.shape[1:], (b["x"], b["y"], b["w"], b["h"]), engine=engine, **settings)
+        for frame in frames[:20]:
+            tracker.update(frame)
+        out.append(tracker.finish())
+        if "grey_range" in settings:
+            assert tuple(tracker.k.get("ranges")[0]) == EIGHT_BIT
+    assert len(out[0]) == 20 and np.max(np.hypot(out[0]["x"] - out[1]["x"], out[0]["y"] - out[1]["y"])) < 1.0
+    last = boxes[boxes["frame"] == 19][0]
+    assert np.hypot(out[0]["x"][-1] - (last["x"] + last["w"] / 2), out[0]["y"][-1] - (last["y"] + last["h"] / 2)) < 10
 
 
 @pytest.mark.slow

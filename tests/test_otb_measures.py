@@ -4,6 +4,7 @@ import json
 import math
 import re
 
+import cv2
 import numpy as np
 import pytest
 
@@ -220,4 +221,25 @@ def test_overlay_gif_draws_the_boxes_on_the_kept_frames(tmp_path):
     assert tuple(first[15, 5]) == (0, 200, 0)
     bgr = track_colour(1)  # the track's box: centre (15 + 4, 18), 20×20 → left edge at column 9
     assert tuple(first[18, 9]) == (bgr[2], bgr[1], bgr[0])
+    assert b["frame"] == 0
+
+
+@pytest.mark.parametrize("kind", ["boxes", "points"])
+def test_overlay_video_draws_the_truth_in_green(tmp_path, kind):
+    """``track --video --truth``: label boxes as rectangles, point truth as circles, in green (the video codec
+    blurs colours, hence the margins)."""
+    from tbd_taichi.plots import write_overlay_video
+
+    boxes = make_boxes(n=4)
+    truth = boxes if kind == "boxes" else tracks_on(boxes)[["frame", "x", "y"]]
+    frames = [np.zeros((60, 80), np.float32) for _ in range(4)]
+    assert write_overlay_video(frames, tracks_on(boxes[:0]), tmp_path / "o.avi", truth=truth) == 4
+    ok, img = cv2.VideoCapture(str(tmp_path / "o.avi")).read()
+    assert ok
+    b = boxes[0]
+    column = 5 if kind == "boxes" else 7  # the box's left edge (x 5..25) or the circle's (radius 8 around x 15)
+    near = img[16:21, column - 1:column + 2].astype(int)  # B, G, R around (column, 18)
+    green = near[..., 1] - np.maximum(near[..., 0], near[..., 2])
+    assert green.max() > 40 and near[..., 1].max() > 110, near
+    assert img[40:, 50:].max() < 40  # nothing drawn far from the truth
     assert b["frame"] == 0

@@ -21,7 +21,7 @@ from .. import backend
 from ..engines import kernel_module
 from ..errors import ParameterError
 from ..io import stream_frame
-from ..kernels.feature_fusion import FEATURES, MAX_HALF, gabor_taps, serial_step
+from ..kernels.feature_fusion import FEATURES, FUSIONS, MAX_HALF, gabor_taps, serial_step
 from ..numpy_kernels.rng import normal, uniform
 from ..tables import TRACK_COLUMNS, _dtype, make_table
 from .registry import MethodSpec, OneSequence, param, validate_params
@@ -30,6 +30,7 @@ EXTRA_COLUMNS = ("w", "h")
 S_INIT_X, S_INIT_Y, S_RESAMPLE = 10, 11, 12  # host streams (the kernels use 0, 1)
 STAGES = ("features", "particles", "resampling")  # feature maps; propagate, weigh, estimate; resampling
 RANGE_PERCENTILES = (0.5, 99.5)  # each feature's bins span these percentiles of frame 0
+EIGHT_BIT = (0.0, 256.0)  # grey_range=8-bit: the grey bins' range, each of M bins 256/M grey levels wide
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))  # Eq. 25, in units of Δd
 
 
@@ -41,7 +42,7 @@ class FeatureFusionParams:
                              low=1, high=100_000)
     bins: int = param(16, doc="histogram bins per feature (the paper's [0, 255] would give 256, too sparse for a "
                       "small box)", symbol="M", source="Eq. 12", low=2, high=256)
-    sigma_q: float = param(4.0, doc="random-walk standard deviation per axis", symbol="σ_q", unit="px",
+    sigma_q: float = param(2.0, doc="random-walk standard deviation per axis", symbol="σ_q", unit="px",
                            source="Eq. 1 (value not in the paper)", low=0, high=100)
     sigma_0: float = param(2.0, doc="initial spread of the particles around the box centre", symbol="σ₀",
                            unit="px", source="not in the paper", low=0, high=100)
@@ -57,10 +58,14 @@ class FeatureFusionParams:
     delta_d: float = param(2.0, doc="distance of the new candidate points", symbol="Δd", unit="px",
                            source="§3.3, Eq. 25", low=0, high=50)
     replace_share: float = param(0.2, doc="share of particles replaced by candidates", source="§3.3", low=0, high=1)
+    grey_range: str = param("frame", doc="the grey bins' range: frame (frame 0's 0.5–99.5 percentiles, as the edge "
+                            "and Gabor bins) or 8-bit ([0, 256): M equal bins of the paper's [0, 255] grey levels)",
+                            source="Eq. 12", choices=("frame", "8-bit"))
     min_window: int = param(5, doc="the feature window is at least this many px on a side", unit="px",
                             source="not in the paper (its targets are 2×2)", low=1, high=2 * MAX_HALF + 1)
-    fusion: str = param("adaptive", doc="adaptive (Eqs. 19–21) or grey (the grey histogram alone: the ablation)",
-                        source="§3.2", choices=("adaptive", "grey"))
+    fusion: str = param("adaptive", doc="adaptive (Eqs. 19–21, ρ = Σ v_i ρ_i), bin-sum (Eq. 21's bin-wise sum of "
+                        "the v-weighted histograms, as printed) or grey (the grey histogram alone: the ablation)",
+                        source="§3.2", choices=("adaptive", "bin-sum", "grey"))
     resampling: str = param("improved", doc="improved (residual + Eq. 24's new particles) or residual (plain)",
                             source="§3.3", choices=("improved", "residual"))
     motion: str = param("random-walk", doc="random-walk (Eq. 1) or constant-velocity (an extension)",
@@ -125,7 +130,7 @@ class FeatureFusionTracker(OneSequence):
         self.k.put("col_taps", col)
         self.serial = serial_step(self.n, *self.half)
         self.k.configure(self.p.sigma_q, int(self.p.motion == "constant-velocity"), *self.half, self.p.sigma_l,
-                         int(self.p.fusion == "adaptive"))
+                         FUSIONS.index(self.p.fusion))
         self.raw = np.zeros((FEATURES,) + self.shape, np.float32)
         self.centre = np.array([x + w / 2.0, y + h / 2.0])  # the box centre, as drone-ir's cx, cy
         self.summary = np.zeros(4)  # x̂, ŷ, N_eff, ρ at the estimate
@@ -135,12 +140,14 @@ class FeatureFusionTracker(OneSequence):
         self.seconds = {s: 0.0 for s in STAGES}
 
     def _weigh(self, first: int, count: int) -> None:
-        self.k.weigh(first, count, *self.half, self.p.sigma_l, int(self.p.fusion == "adaptive"))
+        self.k.weigh(first, count, *self.half, self.p.sigma_l, FUSIONS.index(self.p.fusion))
 
     def _start(self, frame: np.ndarray) -> None:
         """Frame 0: the bins' ranges, the template histograms at the box centre (Eq. 12) and the particles."""
         self.k.feature_maps(frame, self.raw, 1)
         lo, hi = np.percentile(self.raw.reshape(FEATURES, -1), RANGE_PERCENTILES, axis=1)
+        if self.p.grey_range == "8-bit":
+            lo[0], hi[0] = EIGHT_BIT
         self.k.put("ranges", np.stack([lo, np.maximum(hi, lo + 1e-6)], axis=1))
         self.k.rebin(self.raw)
         state = np.zeros((self.n + 1, 4), np.float32)
@@ -265,5 +272,5 @@ SPEC = MethodSpec(
     particle_count=lambda shape, params: params.n_particles, extra_columns=lambda params: EXTRA_COLUMNS,
     bench_settings=lambda snr: {"init_box": BENCH_BOX}, bench_frames=bench_frames,
     assumes="one target whose first-frame box is given; it keeps its size and roughly its appearance, moving "
-            "≤ ~3σ_q = 12 px a frame",
+            "≤ ~3σ_q = 6 px a frame",
 )

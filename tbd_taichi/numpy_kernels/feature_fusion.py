@@ -72,7 +72,7 @@ class FeatureFusionKernels:
     def rebin(self, raw: np.ndarray) -> None:
         self.binmap[...] = self._bins(np.asarray(raw, F32))
 
-    def weigh(self, first: int, count: int, half_x: float, half_y: float, sigma_l: float, adaptive: int) -> None:
+    def weigh(self, first: int, count: int, half_x: float, half_y: float, sigma_l: float, fusion: int) -> None:
         """Histograms, Eq. 19's c, Eq. 20's v, the fused ρ and the log-likelihood of particles [first, first + count)."""
         sl = slice(first, first + count)
         h, w = self.shape
@@ -106,11 +106,14 @@ class FeatureFusionKernels:
         with np.errstate(invalid="ignore", divide="ignore"):
             c = np.where((sxx > 0) & (syy > 0), (dt * dcand).sum(axis=2) / np.sqrt(sxx * syy), F32(0.0))
         rhos = np.sqrt(t * hist).sum(axis=2)
-        if adaptive:
+        if fusion:
             v = (c + 1) / np.maximum((c + 1).sum(axis=1, keepdims=True), F32(1e-12))
         else:
             v = np.tile(np.array([[1.0, 0.0, 0.0]], F32), (count, 1))
         rho = (v * rhos).sum(axis=1)
+        if fusion == 2:  # Eq. 21's bin-wise sum, the candidate's v on both sides
+            ft, fc = (v[:, :, None] * t).sum(axis=1), (v[:, :, None] * hist).sum(axis=1)
+            rho = np.sqrt(ft * fc).sum(axis=1)
         self.fusion[sl], self.rho[sl] = v, rho
         self.loglik[sl] = -(F32(1.0) - rho) / (F32(2.0) * F32(sigma_l) ** 2)
 
@@ -126,18 +129,18 @@ class FeatureFusionKernels:
         out[:3] = (x, y, 1.0 / ((w / total) ** 2).sum())
 
     def configure(self, sigma_q: float, velocity: int, half_x: float, half_y: float, sigma_l: float,
-                  adaptive: int) -> None:
+                  fusion: int) -> None:
         """step()'s constants (``CONFIG``), as the kernel's."""
-        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, adaptive])
+        self.put("config", [sigma_q, velocity, half_x, half_y, sigma_l, fusion])
 
     def step(self, seed: int, frame: int, out: np.ndarray, serial: bool = False) -> None:
         """The random walk, every particle weighed, Eqs. 10, 6, 23, the estimate weighed (see the kernel; ``serial``
         changes nothing here)."""
-        sigma_q, velocity, half_x, half_y, sigma_l, adaptive = self.config
+        sigma_q, velocity, half_x, half_y, sigma_l, fusion = self.config
         self.random_walk(seed, frame, sigma_q, int(velocity))
-        self.weigh(0, self.n - 1, half_x, half_y, sigma_l, int(adaptive))
+        self.weigh(0, self.n - 1, half_x, half_y, sigma_l, int(fusion))
         self.accumulate(out)
-        self.weigh(self.n - 1, 1, half_x, half_y, sigma_l, int(adaptive))
+        self.weigh(self.n - 1, 1, half_x, half_y, sigma_l, int(fusion))
         out[3] = self.rho[self.n - 1]
 
     def random_walk(self, seed: int, frame: int, sigma_q: float, velocity: int) -> None:
