@@ -6,6 +6,7 @@ import numpy as np
 
 from ... import backend
 from ...engines import kernel_module
+from ...launch import Launcher
 from ...kernels.phd import (CX, CY, FRAME, GROUP_FLOAT, GROUP_INT, LENGTH, NO_CENTRE, OUT_ID, OUT_LEN,
                              N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
 from ...motion_models import DIM, model_set
@@ -43,7 +44,7 @@ class PhdPool:
         # Taichi compiles a data-oriented object's kernels once per object: a new pool takes the fields of a
         # finished one of the same size (backend.reusable); the NumPy twin has nothing to compile
         self.k = module.PhdKernels(*dims) if engine == "numpy" else \
-            backend.reusable(self, ("phd",) + dims, lambda: module.PhdKernels(*dims))
+            Launcher(backend.reusable(self, ("phd",) + dims, lambda: module.PhdKernels(*dims)))
         self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
@@ -59,14 +60,14 @@ class PhdPool:
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,
         with newborn weight 0 this frame); returns their number."""
-        self.k.put("raw", z)
+        backend.from_host(self.k.raw, z)
         if not births:
             return 0
         cells = np.flatnonzero(z.ravel() >= self.d.threshold).astype(np.int32)
         self.birth[4] = self.p.birth_mass / self.p.births if cells.size else 0.0
         full = np.arange(z.size, dtype=np.int32)
         full[:cells.size] = cells
-        self.k.put("cells", full)
+        backend.from_host(self.k.cells, full)
         return int(cells.size) or z.size
 
     def layout(self, lengths, masked, qscale, centres=None, radii=None) -> int:
@@ -85,8 +86,8 @@ class PhdPool:
         self.gflt[:n, CX:CY + 1] = NO_CENTRE if centres is None else centres
         self.gflt[:n, RADIUS] = self.d.class_radius if radii is None else radii
         self.n_groups = n
-        self.k.put("gint", g)
-        self.k.put("gflt", self.gflt)
+        backend.from_host(self.k.gint, g)
+        backend.from_host(self.k.gflt, self.gflt)
         return int(np.sum(lengths))
 
     def propagate(self, frame_key: int, total: int, n_cells: int, births: int = 0, backward: bool = False) -> None:
@@ -115,7 +116,7 @@ class PhdPool:
         """Eqs. 20, 35 for the groups; returns the kernels' ``est`` table (all groups)."""
         if n_groups > 0:
             self.k.estimate(first_group, n_groups, self.d.class_radius)
-        return self.k.get("est")
+        return backend.to_host(self.k.est)
 
     def mask(self, centres: np.ndarray) -> None:
         """Eq. 36: the detector's frame with I_0 over the windows around ``centres`` (x, y rows), ⌊3Σ⌋ +
@@ -125,7 +126,7 @@ class PhdPool:
 
     def n_hat(self) -> tuple[np.ndarray, np.ndarray]:
         """n̂ of each group of the layout (Eq. 19) and the largest PHD mass Ψ/(λ + Ψ) of one of its cells."""
-        out = self.k.get("gout")[:self.n_groups].astype(float)
+        out = backend.to_host(self.k.gout)[:self.n_groups].astype(float)
         return out[:, N_HAT], out[:, TOP]
 
     def resample(self, frame_key: int, out_lengths, out_weights, keep, room: int = 0) -> int:
@@ -139,8 +140,8 @@ class PhdPool:
         g[:n, OUT_START] = np.concatenate([[0], np.cumsum(lens)[:-1]]) + np.where(np.arange(n) > 0, room, 0)
         g[:n, OUT_ID] = np.cumsum(keep) - 1
         self.gflt[:n, OUT_WEIGHT] = out_weights
-        self.k.put("gint", g)
-        self.k.put("gflt", self.gflt)
+        backend.from_host(self.k.gint, g)
+        backend.from_host(self.k.gflt, self.gflt)
         self.k.resample(self.seed, frame_key, n, int(max(lens.max(initial=0), 1)))
         total = int(lens.sum()) + (room if n > 0 else 0)
         self.k.commit(total)
