@@ -70,7 +70,8 @@ class FeatureFusionKernels:
         self.hist = ti.field(ti.f32, (self.n, FEATURES, self.bins))
         self.template = ti.field(ti.f32, (FEATURES, self.bins))
         self.loglik, self.rho = ti.field(ti.f32, self.n), ti.field(ti.f32, self.n)
-        self.fusion = ti.field(ti.f32, (self.n, FEATURES))
+        self.fusion = ti.field(ti.f32, (self.n, FEATURES))  # v_i (Eq. 20)
+        self.corr = ti.field(ti.f32, (self.n, FEATURES))  # c_i (Eq. 19)
         self.logw = ti.field(ti.f64, self.n)  # accumulated log-weights (slot n − 1, the estimate, unused)
         self.config = ti.field(ti.f32, len(CONFIG))
         self.tables = NormalTables.shared()
@@ -177,6 +178,7 @@ class FeatureFusionKernels:
                     rho += ti.sqrt(ft * fc)
             for f in ti.static(range(FEATURES)):
                 self.fusion[p, f] = v[f]
+                self.corr[p, f] = cs[f]
             self.rho[p] = rho
             self.loglik[p] = -(1.0 - rho) / (2.0 * sigma_l * sigma_l)
 

@@ -90,12 +90,16 @@ def test_histograms_likelihood_and_fusion_agree_with_the_twin(rng, fusion):
         v, t, hist = pools[0].get("fusion"), pools[0].get("template"), pools[0].get("hist")
         ref = np.sqrt(np.einsum("pf,fb->pb", v, t) * np.einsum("pf,pfb->pb", v, hist)).sum(axis=1)
         np.testing.assert_allclose(pools[0].get("rho"), ref, rtol=1e-5, atol=1e-6)
-    for name in ("hist", "rho", "loglik", "fusion"):
+    for name in ("hist", "rho", "loglik", "fusion", "corr"):
         np.testing.assert_allclose(pools[0].get(name), pools[1].get(name), rtol=1e-4, atol=1e-5, err_msg=name)
     hist = pools[0].get("hist")
     np.testing.assert_allclose(hist.sum(axis=2), 1.0, atol=1e-5)  # Eq. 13 normalises each histogram
     # slot 0 is the template's own window: c_i = 1, v_i = 1/3, ρ = 1, log-likelihood 0
+    np.testing.assert_allclose(pools[0].get("corr")[0], 1.0, atol=1e-5)
     np.testing.assert_allclose(pools[0].get("fusion")[0], 1 / 3, atol=1e-5)
+    template, corr = pools[0].get("template"), pools[0].get("corr")  # Eq. 19 against NumPy's Pearson
+    ref = [[np.corrcoef(template[f], hist[p, f])[0, 1] for f in range(3)] for p in range(1, 64)]
+    np.testing.assert_allclose(corr[1:], np.nan_to_num(ref), atol=1e-4)
     assert pools[0].get("rho")[0] == pytest.approx(1.0, abs=1e-5) and pools[0].get("loglik")[0] == pytest.approx(0, abs=1e-3)
     assert np.all(pools[0].get("rho") <= 1 + 1e-5)
 

@@ -34,6 +34,7 @@ class FeatureFusionKernels:
         self.template = np.zeros((FEATURES, self.bins), F32)
         self.loglik, self.rho = np.zeros(self.n, F32), np.zeros(self.n, F32)
         self.fusion = np.zeros((self.n, FEATURES), F32)
+        self.corr = np.zeros((self.n, FEATURES), F32)
         self.logw = np.zeros(self.n)
         self.config = np.zeros(len(CONFIG), F32)
 
@@ -114,7 +115,7 @@ class FeatureFusionKernels:
         if fusion == 2:  # Eq. 21's bin-wise sum, the candidate's v on both sides
             ft, fc = (v[:, :, None] * t).sum(axis=1), (v[:, :, None] * hist).sum(axis=1)
             rho = np.sqrt(ft * fc).sum(axis=1)
-        self.fusion[sl], self.rho[sl] = v, rho
+        self.fusion[sl], self.corr[sl], self.rho[sl] = v, c, rho
         self.loglik[sl] = -(F32(1.0) - rho) / (F32(2.0) * F32(sigma_l) ** 2)
 
     def accumulate(self, out: np.ndarray) -> None:
