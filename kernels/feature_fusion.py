@@ -46,9 +46,10 @@ def gabor_taps(sigma_x: float, sigma_y: float, omega: float) -> tuple[np.ndarray
 
 
 def serial_step(n: int, half_x: float, half_y: float) -> bool:
-    """Whether :meth:`FeatureFusionKernels.step` should run its particle loops in one thread: when the histograms'
-    work, n particles × the window's pixels, is below ``SERIAL_WORK`` (a parallel loop's start, tens of µs on the
-    CPU backend, would cost more than it saves; docs/performance.md#feature-fusion-issue-39)."""
+    """Whether :meth:`FeatureFusionKernels.step` should run its particle loops in one thread on the CPU backend:
+    when the histograms' work, n particles × the window's pixels, is below ``SERIAL_WORK`` (a parallel loop's
+    start, tens of µs there, would cost more than it saves; docs/performance.md#feature-fusion-issue-39).  The
+    caller asks only on the CPU: on a GPU one device thread would be slow."""
     return n * (2 * math.floor(half_x) + 1) * (2 * math.floor(half_y) + 1) < SERIAL_WORK
 
 

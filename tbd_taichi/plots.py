@@ -24,6 +24,12 @@ def track_colour(track_id: int) -> tuple[int, int, int]:
     return int(bgr[0]), int(bgr[1]), int(bgr[2])
 
 
+def stretched(frame: np.ndarray) -> np.ndarray:
+    """A float frame as 8-bit BGR for the overlays, stretched from its 1st to its 99.9th percentile."""
+    lo, hi = np.percentile(frame, (1, 99.9))
+    return to_display(frame, lo, hi)
+
+
 def to_display(frame: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """A float frame as 8-bit BGR, stretched from [lo, hi]."""
     grey = np.clip((frame - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
@@ -84,8 +90,11 @@ def plot_otb_per_sequence(per_sequence: dict, path, title: str = "", columns: in
     :func:`plot_otb_curves`), ``columns`` sequences a row.  ``per_sequence``: {sequence: {label: OTB scores}}."""
     from .errors import ParameterError
 
+    from .validate import whole
+
     if not isinstance(per_sequence, dict) or not per_sequence:
         raise ParameterError("per_sequence must be a non-empty dict {sequence: {label: OTB scores}}")
+    columns = whole("columns", columns, 1)
     checked = {}
     for name, results in per_sequence.items():
         checked[name], path, plt = _otb_setup(results, path)
@@ -187,8 +196,7 @@ def write_overlay_video(frames, tracks: np.ndarray, path, fps: float = 15.0, tru
     by_frame, truth_by_frame = _rows_by_frame(tracks), _rows_by_frame(truth)
     n = 0
     for f, frame in enumerate(frames):
-        lo, hi = np.percentile(frame, (1, 99.9))
-        img = to_display(frame, lo, hi)
+        img = stretched(frame)
         if writer is None:
             fourcc = cv2.VideoWriter_fourcc(*("mp4v" if path.suffix.lower() == ".mp4" else "MJPG"))
             writer = cv2.VideoWriter(str(path), fourcc, fps, (img.shape[1], img.shape[0]))
@@ -206,9 +214,20 @@ def write_overlay_gif(frames, tracks: np.ndarray, path, truth: np.ndarray | None
     """A looping GIF (for the docs) of every ``step``-th of the first ``limit`` ``frames`` with the tracks and the
     ``truth`` rows (label boxes frame, x, y, w, h, or points) drawn by :func:`draw_overlay` and the frame number; ``crop``
     (column 0, row 0, column 1, row 1) keeps that part of each frame; ``scale`` > 1 shrinks by that factor.
-    Returns the frames written."""
+    Returns the frames written; a ParameterError for a bad ``limit``, ``step``, ``scale``, ``crop`` or path, and
+    when no frame is kept."""
     from PIL import Image
 
+    from .errors import ParameterError
+    from .validate import output_path, whole
+
+    limit, step, scale = whole("limit", limit, 1), whole("step", step, 1), whole("scale", scale, 1)
+    path = output_path("path", path, (".gif",))
+    if crop is not None:
+        crop = tuple(whole("crop", v, 0) for v in crop)
+        if len(crop) != 4 or crop[2] <= crop[0] or crop[3] <= crop[1]:
+            raise ParameterError(f"crop must be (column 0, row 0, column 1, row 1) with column 1 > column 0 and "
+                                 f"row 1 > row 0, got {crop!r}")
     by_frame, truth_by_frame = _rows_by_frame(tracks), _rows_by_frame(truth)
     images = []
     for f, frame in enumerate(frames):
@@ -216,12 +235,14 @@ def write_overlay_gif(frames, tracks: np.ndarray, path, truth: np.ndarray | None
             break
         if f % step:
             continue
-        lo, hi = np.percentile(frame, (1, 99.9))
-        img = draw_overlay(to_display(frame, lo, hi), tracks, by_frame.get(f, ()), f, truth_by_frame.get(f, ()))
+        img = draw_overlay(stretched(frame), tracks, by_frame.get(f, ()), f, truth_by_frame.get(f, ()))
         if crop is not None:
+            if crop[2] > img.shape[1] or crop[3] > img.shape[0]:
+                raise ParameterError(f"crop {crop!r} reaches outside the {img.shape[1]}x{img.shape[0]} frame")
             img = np.ascontiguousarray(img[crop[1]:crop[3], crop[0]:crop[2]])
         cv2.putText(img, str(f), (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 255, 255), 1)
         images.append(Image.fromarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB)[::scale, ::scale]))
-    if images:
-        images[0].save(path, save_all=True, append_images=images[1:], duration=ms_per_frame, loop=0, optimize=True)
+    if not images:
+        raise ParameterError(f"no frame to write to {path}: the input has no frame below limit {limit}")
+    images[0].save(path, save_all=True, append_images=images[1:], duration=ms_per_frame, loop=0, optimize=True)
     return len(images)

@@ -243,3 +243,21 @@ def test_overlay_video_draws_the_truth_in_green(tmp_path, kind):
     assert green.max() > 40 and near[..., 1].max() > 110, near
     assert img[40:, 50:].max() < 40  # nothing drawn far from the truth
     assert b["frame"] == 0
+
+
+@pytest.mark.parametrize("bad, match", [({"step": 0}, "step"), ({"scale": 0}, "scale"), ({"limit": 0}, "limit"),
+                                        ({"crop": (10, 0, 5, 20)}, "crop"), ({"crop": (0, 0, 200, 20)}, "outside"),
+                                        ({"path": "o.png"}, "path")])
+def test_overlay_gif_refuses_bad_arguments(tmp_path, bad, match):
+    from tbd_taichi.plots import write_overlay_gif
+
+    boxes = make_boxes(n=2)
+    kw = {"path": "o.gif", **bad}
+    from tbd_taichi.errors import TBDError
+
+    with pytest.raises(TBDError, match=match):  # a ParameterError, or an InputError for the path
+        write_overlay_gif([np.zeros((60, 80), np.float32)] * 2, tracks_on(boxes), tmp_path / kw.pop("path"), **kw)
+    with pytest.raises(ParameterError, match="columns"):
+        from tbd_taichi.plots import plot_otb_per_sequence
+
+        plot_otb_per_sequence({"a": {"x": otb_scores(tracks_on(boxes), boxes)}}, tmp_path / "g.png", columns=0)

@@ -28,7 +28,7 @@ from .registry import MethodSpec, OneSequence, param, validate_params
 
 EXTRA_COLUMNS = ("w", "h")
 S_INIT_X, S_INIT_Y, S_RESAMPLE = 10, 11, 12  # host streams (the kernels use 0, 1)
-STAGES = ("features", "particles", "resampling")  # feature maps; propagate, weigh, estimate; resampling
+STAGES = ("features", "particles", "resampling")  # feature maps; random walk, weigh, estimate; resampling
 RANGE_PERCENTILES = (0.5, 99.5)  # each feature's bins span these percentiles of frame 0
 EIGHT_BIT = (0.0, 256.0)  # grey_range=8-bit: the grey bins' range, each of M bins 256/M grey levels wide
 NEIGHBOURS = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1))  # Eq. 25, in units of Δd
@@ -128,7 +128,8 @@ class FeatureFusionTracker(OneSequence):
                                                lambda: module.FeatureFusionKernels(*dims)))
         self.k.put("row_taps", row)
         self.k.put("col_taps", col)
-        self.serial = serial_step(self.n, *self.half)
+        cfg = backend.current()  # on a GPU the loops stay parallel: one device thread would be slow
+        self.serial = cfg is not None and cfg.arch == "cpu" and serial_step(self.n, *self.half)
         self.k.configure(self.p.sigma_q, int(self.p.motion == "constant-velocity"), *self.half, self.p.sigma_l,
                          FUSIONS.index(self.p.fusion))
         self.raw = np.zeros((FEATURES,) + self.shape, np.float32)
