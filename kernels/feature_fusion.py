@@ -25,7 +25,7 @@ from .rng import NormalTables, key_prefix, normal_at
 FEATURES = 3  # grey, edge, Gabor
 S_X, S_Y = 0, 1  # random-walk streams
 FUSIONS = ("grey", "adaptive", "bin-sum")  # the fusion modes' codes are their indices (weigh_range)
-SERIAL_WORK = 50_000  # particle-pixels: below this, step() runs its particle loops in one thread (serial_step)
+SERIAL_WORK = 49_999  # particle-pixels: up to this, step() runs its particle loops in one thread (histogram_work)
 CONFIG = ("sigma_q", "velocity", "half_x", "half_y", "sigma_l", "fusion")  # step()'s constants, in this order
 MAX_HALF = 64  # px: the largest half window (a box of 129 px)
 SOBEL = (
@@ -45,12 +45,11 @@ def gabor_taps(sigma_x: float, sigma_y: float, omega: float) -> tuple[np.ndarray
     return row.astype(np.float32), col.astype(np.float32)
 
 
-def serial_step(n: int, half_x: float, half_y: float) -> bool:
-    """Whether :meth:`FeatureFusionKernels.step` should run its particle loops in one thread on the CPU backend:
-    when the histograms' work, n particles × the window's pixels, is below ``SERIAL_WORK`` (a parallel loop's
-    start, tens of µs there, would cost more than it saves; docs/performance.md#feature-fusion-issue-39).  The
-    caller asks only on the CPU: on a GPU one device thread would be slow."""
-    return n * (2 * math.floor(half_x) + 1) * (2 * math.floor(half_y) + 1) < SERIAL_WORK
+def histogram_work(n: int, half_x: float, half_y: float) -> int:
+    """The histograms' work of one :meth:`FeatureFusionKernels.step`: n particles × the window's pixels.  Up to
+    ``SERIAL_WORK`` the step runs its particle loops in one thread on the CPU backend (``backend.serial_loops``: a
+    parallel loop's start, tens of µs there, would cost more than it saves; docs/performance.md#feature-fusion-issue-39)."""
+    return n * (2 * math.floor(half_x) + 1) * (2 * math.floor(half_y) + 1)
 
 
 @ti.data_oriented
@@ -216,7 +215,7 @@ class FeatureFusionKernels:
     @ti.kernel
     def step(self, seed: ti.u32, frame: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1), serial: ti.template()):
         """One frame in one launch (:meth:`frame_step`); ``serial``: all of it in the launching thread
-        (:func:`serial_step`: for a few hundred particles a parallel loop's start costs more than its work)."""
+        (:func:`histogram_work`: for a few hundred particles a parallel loop's start costs more than its work)."""
         if ti.static(serial):
             ti.loop_config(serialize=True)
             for _ in range(1):

@@ -250,11 +250,12 @@ def keep_freed_memory() -> bool:
 SERIAL_PIXELS = 1 << 19
 
 
-def serial_loops(pixels: int) -> bool:
-    """Whether image kernels should run their loops on one thread: on the CPU, for images of at most
-    SERIAL_PIXELS (there a parallel launch's dispatch costs more than the work it splits)."""
+def serial_loops(work: int, limit: int | None = None) -> bool:
+    """Whether kernels should run their loops on one thread: on the CPU, for at most ``limit`` units of work
+    (None: images of at most SERIAL_PIXELS pixels, read at the call; there a parallel launch's dispatch costs
+    more than the work it splits).  Never on a GPU, where one device thread would be slow."""
     cfg = current()
-    return cfg is not None and cfg.arch == "cpu" and pixels <= SERIAL_PIXELS
+    return cfg is not None and cfg.arch == "cpu" and work <= (SERIAL_PIXELS if limit is None else limit)
 
 
 def cpu_threads() -> int:

@@ -130,7 +130,7 @@ def test_one_launch_step_is_the_twins_serial_or_parallel(rng, velocity):
         for a, b, name in zip(outs[0], got, ("state", "logw", "out")):
             np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5, err_msg=name)
     assert 1 <= outs[0][2][2] <= n - 1 and 0 < outs[0][2][3] <= 1 + 1e-5  # N_eff, ρ at the estimate
-    assert tk.serial_step(200, 4.5, 4.5) and not tk.serial_step(2000, 4.5, 4.5)
+    assert tk.histogram_work(200, 4.5, 4.5) <= tk.SERIAL_WORK < tk.histogram_work(2000, 4.5, 4.5)
 
 
 def test_histogram_by_hand_on_a_tiny_window():

@@ -21,7 +21,7 @@ from .. import backend
 from ..engines import kernel_module
 from ..errors import ParameterError
 from ..io import stream_frame
-from ..kernels.feature_fusion import FEATURES, FUSIONS, MAX_HALF, gabor_taps, serial_step
+from ..kernels.feature_fusion import FEATURES, FUSIONS, MAX_HALF, SERIAL_WORK, gabor_taps, histogram_work
 from ..numpy_kernels.rng import normal, uniform
 from ..tables import TRACK_COLUMNS, _dtype, make_table
 from .registry import MethodSpec, OneSequence, param, validate_params
@@ -128,8 +128,7 @@ class FeatureFusionTracker(OneSequence):
                                                lambda: module.FeatureFusionKernels(*dims)))
         self.k.put("row_taps", row)
         self.k.put("col_taps", col)
-        cfg = backend.current()  # on a GPU the loops stay parallel: one device thread would be slow
-        self.serial = cfg is not None and cfg.arch == "cpu" and serial_step(self.n, *self.half)
+        self.serial = backend.serial_loops(histogram_work(self.n, *self.half), SERIAL_WORK)
         self.k.configure(self.p.sigma_q, int(self.p.motion == "constant-velocity"), *self.half, self.p.sigma_l,
                          FUSIONS.index(self.p.fusion))
         self.raw = np.zeros((FEATURES,) + self.shape, np.float32)
