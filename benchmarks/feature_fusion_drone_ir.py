@@ -43,11 +43,14 @@ def static_box(box, first: int, n: int) -> np.ndarray:
                                  ("h", float)])
 
 
-def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float, np.ndarray]:
-    """The OTB scores of one configuration on one clip, its tracker's frames/s (start-up excluded) and its
-    tracks."""
-    boxes = tables.read_boxes(labels)
-    frames = io.read_frames(video)
+def load_clip(video: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A drone-ir clip's frames and its label boxes (the CSV beside it)."""
+    return io.read_frames(video), tables.read_boxes(video.with_suffix(".csv"))
+
+
+def run_clip(frames: np.ndarray, boxes: np.ndarray, settings) -> tuple[dict, float, np.ndarray]:
+    """The OTB scores of one configuration on one clip's ``frames`` from its first label box, its tracker's
+    frames/s (start-up excluded) and its tracks."""
     b = boxes[0]
     first = int(b["frame"])
     seq = frames[first:]
@@ -66,12 +69,9 @@ def run_clip(video: Path, labels: Path, settings) -> tuple[dict, float, np.ndarr
     return otb_scores(tracks, boxes), fps, tracks
 
 
-def huo_scores(sequence: str, seed: int = 0, dim_contrast: float = 3.0, **settings) -> dict:
-    """OTB scores of feature-fusion with ``settings`` (``static=True``: the box left at the start) on one huo2022
-    sequence (200 frames) from its first box, with ``fps`` (the whole track call)."""
-    from tbd_taichi.huo2022 import simulate_huo2022
-
-    sc = simulate_huo2022(sequence, seed=seed, dim_contrast=dim_contrast)
+def huo_scores(sc, **settings) -> dict:
+    """OTB scores of feature-fusion with ``settings`` (``static=True``: the box left at the start) on the huo2022
+    scene ``sc`` (``simulate_huo2022``) from its first box, with ``fps`` (the whole track call)."""
     b = sc.truth[0]
     if settings.get("static"):
         return {**otb_scores(static_box(b, 0, len(sc.frames)), sc.truth), "fps": float("nan")}
@@ -84,15 +84,16 @@ def huo_scores(sequence: str, seed: int = 0, dim_contrast: float = 3.0, **settin
 def huo2022_table() -> tuple[list[str], dict]:
     """feature-fusion, its grey-only ablation and the box left at the start on the four huo2022 sequences (200
     frames, seed 0): the table's lines and {sequence: {label: scores}} for the per-sequence plots."""
-    from tbd_taichi.huo2022 import SEQUENCES
+    from tbd_taichi.huo2022 import SEQUENCES, simulate_huo2022
 
     configs = {"feature-fusion": {}, "grey only": {"fusion": "grey"}, "Eq. 21 bin-sum": {"fusion": "bin-sum"},
                "box left at the start": {"static": True}}
     lines = ["", "The huo2022 scenario (`tbd-taichi simulate --scenario huo2022 --sequence S`, 200 frames, seed 0; "
              "after Huo's Table 1). fps: the whole `tbd.track` call, start-up included.", "",
              "| sequence | configuration | CLE px | DP@20 | DP@5 | mean IoU | AUC | fps |", "|---|---|---|---|---|---|---|---|"]
-    per_sequence = {f"huo2022 {seq}": {label: huo_scores(seq, **c) for label, c in configs.items()}
-                    for seq in SEQUENCES}
+    scenes = ((seq, simulate_huo2022(seq, seed=0)) for seq in SEQUENCES)
+    per_sequence = {f"huo2022 {seq}": {label: huo_scores(sc, **c) for label, c in configs.items()}
+                    for seq, sc in scenes}
     rows = [(seq, label, per_sequence[f"huo2022 {seq}"][label]) for seq in SEQUENCES for label in configs]
     for label in configs:  # the mean over the sequences, as Huo's Table 2
         scores = [per_sequence[f"huo2022 {seq}"][label] for seq in SEQUENCES]
@@ -108,19 +109,24 @@ def huo2022_table() -> tuple[list[str], dict]:
 def sigma_q_sweep(clips, default: dict) -> list[str]:
     """The mean drone-ir scores and the fast sequence's for each random-walk σ_q of ``SIGMA_Q_SWEEP`` (``default``:
     the default configuration's {clip: (scores, fps, tracks)}, reused for its σ_q)."""
+    from tbd_taichi.huo2022 import simulate_huo2022
     from tbd_taichi.methods.feature_fusion import FeatureFusionParams
 
+    default_sq, fast = FeatureFusionParams().sigma_q, simulate_huo2022("fast", seed=0)
+    scores = {sq: [] for sq in SIGMA_Q_SWEEP}
+    for c in clips:  # each clip decoded once
+        frames, boxes = load_clip(c)
+        for sq in SIGMA_Q_SWEEP:
+            scores[sq].append(default[c.stem][0] if sq == default_sq else run_clip(frames, boxes, {"sigma_q": sq})[0])
     lines = ["", "The random walk's σ_q (`--param sigma_q=…`; the default, 2 px, was chosen here: there is no "
              "held-out set, so these figures are optimistic for unseen video):", "",
              "| σ_q px | drone-ir CLE px | DP@20 | DP@5 | mean IoU | AUC | huo2022 fast CLE px, DP@20 |",
              "|---|---|---|---|---|---|---|"]
     for sq in SIGMA_Q_SWEEP:
-        scores = [default[c.stem][0] if sq == FeatureFusionParams().sigma_q else
-                  run_clip(c, c.with_suffix(".csv"), {"sigma_q": sq})[0] for c in clips]
-        m = {k: float(np.mean([x[k] for x in scores])) for k in ("cle", "dp20", "dp5", "mean_iou", "auc")}
-        fast = huo_scores("fast", sigma_q=sq)
+        m = {k: float(np.mean([x[k] for x in scores[sq]])) for k in ("cle", "dp20", "dp5", "mean_iou", "auc")}
+        f = huo_scores(fast, sigma_q=sq)
         lines.append(f"| {sq:g} | {m['cle']:.1f} | {100 * m['dp20']:.1f}% | {100 * m['dp5']:.1f}% | "
-                     f"{100 * m['mean_iou']:.1f}% | {m['auc']:.3f} | {fast['cle']:.1f}, {100 * fast['dp20']:.0f}% |")
+                     f"{100 * m['mean_iou']:.1f}% | {m['auc']:.3f} | {f['cle']:.1f}, {100 * f['dp20']:.0f}% |")
     return lines
 
 
@@ -132,13 +138,18 @@ def contrast_sweep() -> list[str]:
              "with DP@20 ≥ 90 % of 3, mean CLE px in brackets.", "",
              "| sequence | configuration | " + " | ".join(f"{c:g}σ" for c in CONTRASTS) + " |",
              "|---|---|" + "---|" * len(CONTRASTS)]
+    from tbd_taichi.huo2022 import simulate_huo2022
+
     for seq in ("weak", "complex"):
-        for label, settings in SWEEP_CONFIGS.items():
-            cells = []
-            for c in CONTRASTS:
-                runs = [huo_scores(seq, seed, c, **settings) for seed in SWEEP_SEEDS]
-                held = sum(r["dp20"] >= 0.9 for r in runs)
-                cells.append(f"{held}/{len(runs)} ({np.mean([r['cle'] for r in runs]):.1f})")
+        runs = {(label, c): [] for label in SWEEP_CONFIGS for c in CONTRASTS}
+        for c in CONTRASTS:
+            for seed in SWEEP_SEEDS:  # each scene simulated once, tracked by every configuration
+                sc = simulate_huo2022(seq, seed=seed, dim_contrast=c)
+                for label, settings in SWEEP_CONFIGS.items():
+                    runs[label, c].append(huo_scores(sc, **settings))
+        for label in SWEEP_CONFIGS:
+            cells = [f"{sum(r['dp20'] >= 0.9 for r in runs[label, c])}/{len(runs[label, c])} "
+                     f"({np.mean([r['cle'] for r in runs[label, c]]):.1f})" for c in CONTRASTS]
             lines.append(f"| {seq} | {label} | " + " | ".join(cells) + " |")
     return lines
 
@@ -154,8 +165,9 @@ def main() -> None:
         raise SystemExit(f"--gif {args.gif!r}: no such clip in {args.data}")
     results = {label: {} for label in CONFIGS}
     for clip in clips:
+        frames, boxes = load_clip(clip)  # decoded once for every configuration
         for label, settings in CONFIGS.items():
-            results[label][clip.stem] = run_clip(clip, clip.with_suffix(".csv"), settings)
+            results[label][clip.stem] = run_clip(frames, boxes, settings)
         s, fps, _ = results["feature-fusion"][clip.stem]
         print(f"{clip.stem}: CLE {s['cle']:.1f} DP@20 {s['dp20']:.2f} IoU {s['mean_iou']:.2f} {fps:.0f} fps",
               flush=True)
@@ -199,10 +211,11 @@ def main() -> None:
     shown = truth[truth["frame"] < GIF_FRAMES]
     shown = shown if len(shown) else truth[:1]
     cx, cy = int(np.mean(shown["x"] + shown["w"] / 2)), int(np.mean(shown["y"] + shown["h"] / 2))
-    height, width = io.open_frames(video).shape
+    source = io.open_frames(video)
+    height, width = source.shape
     x0 = min(max(cx - GIF_SIDE // 2, 0), max(width - GIF_SIDE, 0))
     y0 = min(max(cy - GIF_SIDE // 2, 0), max(height - GIF_SIDE, 0))
-    write_overlay_gif(io.iter_frames(io.open_frames(video)), results["feature-fusion"][args.gif][2], gif,
+    write_overlay_gif(io.iter_frames(source), results["feature-fusion"][args.gif][2], gif,
                       truth=truth, limit=GIF_FRAMES, step=2,
                       crop=(x0, y0, min(x0 + GIF_SIDE, width), min(y0 + GIF_SIDE, height)))
     lines += ["", f"![precision and success plots]({plot.name})", "",

@@ -20,6 +20,7 @@ import numpy as np
 from tbd_taichi import metrics
 from tbd_taichi.methods import make_tracker
 from tbd_taichi.simulate import simulate
+from tbd_taichi.suite import SIZES
 
 
 def end_reason(tracker, track, truth: dict) -> str | None:
@@ -44,7 +45,7 @@ def end_reason(tracker, track, truth: dict) -> str | None:
 
 
 def probe(side: int, snr: float, tests: int, overrides: dict, first: int = 0, verbose: bool = False) -> dict:
-    frames = 70 if side == 50 else 150
+    frames = dict(SIZES)[side]  # the suite's frames for this side
     ends, dsrs, false = collections.Counter(), [], []
     t0 = time.time()
     for k in range(first, first + tests):

@@ -40,11 +40,7 @@ def plot_tracks(max_projection: np.ndarray, tracks: np.ndarray, path, truth: np.
                 title: str = "") -> None:
     """Picture (PNG, PDF or SVG by ``path``'s suffix): tracks (one colour each, the id beside each trail's end)
     over the sequence's max-projection, truth in green; the legend lists the :data:`LEGEND_TRACKS` longest."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 7 * max_projection.shape[0] / max(max_projection.shape[1], 1) + 0.5))
     ax.imshow(max_projection, cmap="gray", interpolation="nearest")
     if truth is not None and len(truth):
@@ -75,7 +71,7 @@ def plot_otb_curves(results: dict, path, title: str = "") -> None:
     (fraction with IoU > t, t = 0..1), one line per tracker, written to ``path`` (PNG, PDF or SVG by its suffix).
     ``results``: {label: scores with ``dp_curve`` and ``success_curve``, as :func:`tbd_taichi.otb.otb_scores`
     gives them}; the legends carry DP@20 and AUC, OTB's ranking values."""
-    curves, path, plt = _otb_setup(results, path)
+    curves, path, plt = _checked_curves(results), _figure_path(path), _pyplot()
     fig, (pre, suc) = plt.subplots(1, 2, figsize=(11, 4.5))
     _otb_axes(pre, suc, curves, "precision plot (DP@20 in [])", "success plot (AUC in [])", 8)
     if title:
@@ -89,15 +85,13 @@ def plot_otb_per_sequence(per_sequence: dict, path, title: str = "", columns: in
     """Huo 2022's Fig. 7 per sequence: for each sequence its precision plot beside its success plot (as
     :func:`plot_otb_curves`), ``columns`` sequences a row.  ``per_sequence``: {sequence: {label: OTB scores}}."""
     from .errors import ParameterError
-
     from .validate import whole
 
     if not isinstance(per_sequence, dict) or not per_sequence:
         raise ParameterError("per_sequence must be a non-empty dict {sequence: {label: OTB scores}}")
     columns = whole("columns", columns, 1)
-    checked = {}
-    for name, results in per_sequence.items():
-        checked[name], path, plt = _otb_setup(results, path)
+    checked = {name: _checked_curves(results) for name, results in per_sequence.items()}
+    path, plt = _figure_path(path), _pyplot()
     rows = -(-len(checked) // columns)
     fig, axes = plt.subplots(rows, 2 * columns, figsize=(5.0 * columns, 2.8 * rows), squeeze=False)
     for i, (name, curves) in enumerate(checked.items()):
@@ -116,11 +110,27 @@ def plot_otb_per_sequence(per_sequence: dict, path, title: str = "", columns: in
     plt.close(fig)
 
 
-def _otb_setup(results, path):
-    """({label: (dp_curve, success_curve)} checked, the checked output path, pyplot on the Agg backend)."""
+def _pyplot():
+    """matplotlib.pyplot on the Agg backend (files only, no display)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _figure_path(path):
+    """``path`` checked as a PNG, PDF or SVG file to write."""
+    from .validate import output_path
+
+    return output_path("path", path, (".png", ".pdf", ".svg"))
+
+
+def _checked_curves(results) -> dict:
+    """{label: (dp_curve, success_curve)} of OTB scores, checked (a ParameterError names the first bad label)."""
     from .errors import ParameterError
     from .otb import DP_THRESHOLDS, SUCCESS_THRESHOLDS
-    from .validate import output_path
 
     if not isinstance(results, dict) or not results:
         raise ParameterError("results must be a non-empty dict {label: OTB scores (tbd_taichi.otb.otb_scores)}")
@@ -134,13 +144,7 @@ def _otb_setup(results, path):
             raise ParameterError(f"results[{label!r}] needs dp_curve ({len(DP_THRESHOLDS)} values) and "
                                  f"success_curve ({len(SUCCESS_THRESHOLDS)} values), as otb_scores gives them")
         curves[str(label)] = (dp, success)
-    path = output_path("path", path, (".png", ".pdf", ".svg"))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return curves, path, plt
+    return curves
 
 
 def _otb_axes(pre, suc, curves: dict, pre_title: str, suc_title: str, fontsize: int) -> None:
