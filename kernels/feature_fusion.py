@@ -20,7 +20,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .rng import NormalTables, key_prefix, normal_at
+from .rng import NormalTables, key_prefix, normals_at
 
 FEATURES = 3  # grey, edge, Gabor
 S_X, S_Y = 0, 1  # random-walk streams
@@ -277,8 +277,8 @@ class FeatureFusionKernels:
         h, w = ti.static(self.shape)
         kx, ky = key_prefix(seed, frame, S_X), key_prefix(seed, frame, S_Y)
         for p in range(self.n):
-            dx = sigma_q * normal_at(self.tables.w, self.tables.k, self.tables.phi, kx, p)
-            dy = sigma_q * normal_at(self.tables.w, self.tables.k, self.tables.phi, ky, p)
+            nx, ny = normals_at(self.tables.w, self.tables.k, self.tables.phi, [kx, ky], p)
+            dx, dy = sigma_q * nx, sigma_q * ny
             if velocity != 0:
                 dx += self.state[p, 2]
                 dy += self.state[p, 3]

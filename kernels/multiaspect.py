@@ -28,7 +28,7 @@ import taichi as ti
 
 from .loops import thread_span
 from .phd import SQRT_HALF, erf
-from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normal_at, uniform_at, uniform_f64_at
+from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normals_at, uniform_at, uniform_f64_at
 
 STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
@@ -167,8 +167,8 @@ class MultiaspectKernels:
         """(x, ẋ, y, ẏ) ~ ``law``: x ~ U[x0, x1], y ~ U[y0, y1], each velocity v_mean + v_sd·n + v_spread·(2u − 1)."""
         ux = uniform_at(key_prefix(seed, frame, stream), p)
         uy = uniform_at(key_prefix(seed, frame, stream + 1), p)
-        nvx = normal_at(self.tables.w, self.tables.k, self.tables.phi, key_prefix(seed, frame, stream + 2), p)
-        nvy = normal_at(self.tables.w, self.tables.k, self.tables.phi, key_prefix(seed, frame, stream + 3), p)
+        nvx, nvy = normals_at(self.tables.w, self.tables.k, self.tables.phi,
+                              [key_prefix(seed, frame, stream + 2), key_prefix(seed, frame, stream + 3)], p)
         uvx = uniform_at(key_prefix(seed, frame, stream + 4), p)
         uvy = uniform_at(key_prefix(seed, frame, stream + 5), p)
         return ti.Vector([law[0] + (law[1] - law[0]) * ux, law[4] + law[5] * nvx + law[6] * (2.0 * uvx - 1.0),
@@ -207,8 +207,7 @@ class MultiaspectKernels:
             q = (self.anc[p] if from_ancestor != 0 else p) + side * self.capacity
             z = self.prev_z[q]
             x, vx, y, vy = self.prev[q, 0], self.prev[q, 1], self.prev[q, 2], self.prev[q, 3]
-            n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, kn[i], p)
-                           for i in ti.static(range(4))], dt=ti.f32)
+            n = normals_at(self.tables.w, self.tables.k, self.tables.phi, kn, p)
             moved = ti.Vector([x + vx + motion[0] * n[0], vx + motion[1] * n[0] + motion[2] * n[1],
                                y + vy + motion[0] * n[2], vy + motion[1] * n[2] + motion[2] * n[3]], dt=ti.f32)
             u_exit, u_asp = uniform_at(k_exit, p), uniform_at(k_asp, p)

@@ -28,7 +28,7 @@ import numpy as np
 import taichi as ti
 
 from .loops import thread_span
-from .rng import NormalTables, key_prefix, normal_at, uniform_at
+from .rng import NormalTables, key_prefix, normals_at, uniform_at
 
 DIM = 7
 MAX_MODELS = 4
@@ -37,6 +37,12 @@ LOG_ZERO = -1.0e30  # log ℓ of a particle outside the image
 S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
 S_RESAMPLE = 15
+# (row, column) of the entries of F, F⁻¹ (F_SUPPORT) and L (L_SUPPORT) that can be non-zero in any of the models
+# cv, c-ct, ac-ct, ca of tbd_taichi.motion_models (checked there by tests/test_mm_phd_kernels.py): the propagation
+# multiplies only these, 17 and 13 of the 49
+F_SUPPORT = ((0, 0), (0, 1), (0, 3), (0, 5), (1, 1), (1, 3), (1, 5), (2, 1), (2, 2), (2, 3), (2, 6), (3, 1), (3, 3),
+             (3, 6), (4, 4), (5, 5), (6, 6))
+L_SUPPORT = ((0, 0), (1, 0), (1, 1), (2, 2), (3, 2), (3, 3), (4, 4), (5, 0), (5, 1), (5, 5), (6, 2), (6, 3), (6, 6))
 SQRT_HALF = 0.7071067811865476
 GROUP_INT = ("start", "length", "frame", "out_start", "out_len", "out_id")
 GROUP_FLOAT = ("qscale", "out_weight", "cx", "cy", "radius")
@@ -123,17 +129,24 @@ class PhdKernels:
                 g = self.group[p]
                 r = self.draw(self.model[p], uniform_at(k_switch, p))
                 self.model[p] = r
-                n = ti.Vector([normal_at(self.tables.w, self.tables.k, self.tables.phi, keys[d], p)
-                               for d in ti.static(range(DIM))], dt=ti.f32)
+                n = normals_at(self.tables.w, self.tables.k, self.tables.phi, keys, p)
                 x = ti.Vector([self.state[p, d] for d in ti.static(range(DIM))], dt=ti.f32)
+                fx = self.transition(self.F_inv, r, x) if backward != 0 else self.transition(self.F, r, x)
+                ln = self.transition(self.L, r, n, L_SUPPORT)
                 s = ti.sqrt(self.gflt[g, QSCALE])
                 for i in ti.static(range(DIM)):
-                    acc = ti.f32(0.0)
-                    for j in ti.static(range(DIM)):
-                        f = self.F_inv[r, i, j] if backward != 0 else self.F[r, i, j]
-                        acc += f * x[j] + s * self.L[r, i, j] * n[j]
+                    acc = fx[i] + s * ln[i]
                     self.state[p, i] = ti.max(acc, i_floor) if i == 4 else acc
                 self.weight[p] *= survive
+
+    @ti.func
+    def transition(self, matrices: ti.template(), r: ti.i32, v, support: ti.template() = F_SUPPORT):
+        """M^(r)·v for the 7×7 matrices M^(r) of ``matrices``, over the entries of ``support`` only (the
+        structural non-zeros of every model's F, F⁻¹ or L)."""
+        out = ti.Vector([0.0] * DIM, dt=ti.f32)
+        for e in ti.static(support):
+            out[e[0]] += matrices[r, e[0], e[1]] * v[e[1]]
+        return out
 
     @ti.func
     def draw(self, row: ti.i32, u: ti.f32) -> ti.i32:

@@ -205,6 +205,36 @@ def normal_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti
     return out
 
 
+
+@ti.func
+def normals_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefixes: ti.template(), index):
+    """One N(0, 1) variate per key prefix of the static list ``prefixes`` (a ti.f32 vector), each equal to
+    ``normal_at(w, k, phi, prefixes[d], index)``.  The fast draws run for every prefix; the slow path
+    (:func:`normal_rejection`, taken by 1.2 % of the variates) has one call site, in a loop over the rejected
+    ones, so a kernel that draws several normals per particle compiles it once instead of once per variate."""
+    n = ti.static(len(prefixes))
+    base = ti.cast(index, ti.u32) * ti.u32(ZIG_TRIES)
+    out = ti.Vector([0.0] * n, dt=ti.f32)
+    slow = ti.u32(0)
+    for d in ti.static(range(n)):
+        h = hash_index(prefixes[d], base)
+        i = ti.cast(h & ti.u32(ZIG_LAYERS - 1), ti.i32)
+        out[d] = zig_signed(h, unit_from_bits(h) * w[i])
+        if (h >> 9) >= k[i]:
+            slow |= ti.u32(1 << d)
+    if slow != 0:
+        for d in range(n):
+            if (slow >> ti.cast(d, ti.u32)) & ti.u32(1) != 0:
+                prefix = prefixes[0]
+                for e in ti.static(range(1, n)):
+                    if d == e:
+                        prefix = prefixes[e]
+                x = normal_rejection(w, k, phi, prefix, base, hash_index(prefix, base))
+                for e in ti.static(range(n)):
+                    if d == e:
+                        out[e] = x
+    return out
+
 @ti.func
 def normal_rejection(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti.u32, base: ti.u32,
                      h0: ti.u32) -> ti.f32:

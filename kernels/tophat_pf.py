@@ -22,7 +22,7 @@ count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot
 import taichi as ti
 
 from .loops import thread_span
-from .rng import NormalTables, key_prefix, normal_at, uniform_f64_at
+from .rng import NormalTables, key_prefix, normals_at, uniform_f64_at
 
 S_X, S_Y, S_START_X, S_START_Y, S_RESAMPLE = 0, 1, 2, 3, 4  # random streams
 SUMMARY = ("x", "y", "s", "snr", "bx", "by", "neff", "loglik")  # per-group columns of ``summary``
@@ -123,8 +123,9 @@ class TophatPFKernels:
         self.list_live()
         for p in range(count * n):
             g = p // n
-            self.x[p] = init[g, 0] + sigma_0 * normal_at(w, k, phi, kx, p)
-            self.y[p] = init[g, 1] + sigma_0 * normal_at(w, k, phi, ky, p)
+            nx, ny = normals_at(w, k, phi, [kx, ky], p)
+            self.x[p] = init[g, 0] + sigma_0 * nx
+            self.y[p] = init[g, 1] + sigma_0 * ny
 
     @ti.kernel
     def set_alive(self, alive: ti.types.ndarray(dtype=ti.i32, ndim=1)):
@@ -168,8 +169,9 @@ class TophatPFKernels:
             g = self.live[q // n]
             p = g * n + q % n
             bx, by = self.drift[g, 0], self.drift[g, 1]
-            x = self.x[p] + bx + c * normal_at(tw, tk, tphi, kx, p)
-            y = self.y[p] + by + c * normal_at(tw, tk, tphi, ky, p)
+            nx, ny = normals_at(tw, tk, tphi, [kx, ky], p)
+            x = self.x[p] + bx + c * nx
+            y = self.y[p] + by + c * ny
             self.xp[p] = x
             self.yp[p] = y
             col = ti.cast(ti.floor(x + 0.5), ti.i32)

@@ -198,6 +198,18 @@ def test_motion_matrices_follow_kinematics():
     assert turn_block(w, T).shape == (4, 4)
 
 
+
+@pytest.mark.parametrize("T, omega", [(1.0, math.pi / 10), (2.0, -0.3), (0.37, 2.9)])
+def test_propagation_support_holds_every_model(T, omega):
+    """The propagate kernel multiplies only F_SUPPORT's entries of F and F⁻¹ and L_SUPPORT's of L: every other
+    entry of every model's matrices is exactly zero, whatever T, ω and the noise densities."""
+    ms = model_set(",".join(MODELS), T, omega, 0.37, 0.05)
+    for name, support in (("F", tk.F_SUPPORT), ("F_inv", tk.F_SUPPORT), ("L", tk.L_SUPPORT)):
+        outside = np.ones((7, 7), bool)
+        outside[tuple(np.array(support).T)] = False
+        assert np.all(ms[name][:, outside] == 0.0), name
+        assert np.all(np.abs(ms[name][:, ~outside]).max(axis=0) > 0), name  # no entry kept in vain
+
 def moved(engine_pool, n, model, qscale=1.0, frame_key=5):
     """n particles at a fixed state, all of ``model``, propagated once with Π = identity."""
     k = engine_pool

@@ -3,7 +3,7 @@ of Eq. 35) and propagation of existing particles (Eqs. 9–10).
 """
 import taichi as ti
 
-from ..rng import key_prefix, normal_at, uniform_at, uniform_f64_at
+from ..rng import key_prefix, normals_at, uniform_at, uniform_f64_at
 from .layout import BIRTH_STREAMS, COPY_TRIES, NOISE_STREAMS, S_EXIST, TWO_PI, first_above
 
 
@@ -141,9 +141,7 @@ class PropagateMixin:
         c11, c21, c22, sq2, i_floor = noise
         w, k, phi = ti.static(self.normal.w, self.normal.k, self.normal.phi)
         if self.e[b, i] == 1 and (self.born[i] == 0 or copies):
-            n1, n2 = normal_at(w, k, phi, keys[0], i), normal_at(w, k, phi, keys[1], i)
-            n3, n4 = normal_at(w, k, phi, keys[2], i), normal_at(w, k, phi, keys[3], i)
-            n5 = normal_at(w, k, phi, keys[4], i)
+            n1, n2, n3, n4, n5 = normals_at(w, k, phi, keys, i)
             x, vx, y, vy, inten = self.motion.step(self.x[b, i], self.vx[b, i], self.y[b, i], self.vy[b, i],
                                                    self.inten[b, i], (n1, n2, n3, n4, n5), (c11, c21, c22, sq2),
                                                    i_floor)
