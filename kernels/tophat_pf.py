@@ -188,8 +188,8 @@ class TophatPFKernels:
 
     @ti.func
     def normalise(self, frame: ti.i32):
-        """Per group (serially): the maximum, c_i = Σ_{l≤i} exp(lw_l − max) (f64), the total, N̂_eff = (Σw)²/Σw²
-        (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
+        """Per group (serially): the maximum, c_i = Σ_{l≤i} exp(lw_l − max) (f32 terms, the sums f64), the total,
+        N̂_eff = (Σw)²/Σw² (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
         n = ti.static(self.n)
         span = ti.static(thread_span(False))
         key = key_prefix(self.seed[None], frame, S_RESAMPLE)
@@ -203,7 +203,7 @@ class TophatPFKernels:
                 for i in range(g * n, (g + 1) * n):
                     wi = ti.cast(0.0, ti.f64)
                     if m > NEG_INF:
-                        wi = ti.exp(ti.cast(self.logw[i] - m, ti.f64))
+                        wi = ti.cast(ti.exp(self.logw[i] - m), ti.f64)
                     else:  # every particle off the image: keep them all alike
                         wi = 1.0
                     s += wi
@@ -217,13 +217,14 @@ class TophatPFKernels:
 
     @ti.func
     def resample_group(self, g: ti.i32) -> ti.types.vector(2, ti.f64):
-        """Alg. 2 for group g: output j copies the first particle whose c_i exceeds (u₁ + j)/N·Σw, found by one
+        """Alg. 2 for group g: output j copies the first particle whose c_i exceeds (u₁ + j)·(Σw/N), found by one
         forward walk (the points rise with j); returns the sums of the copies' x and y."""
         n = ti.static(self.n)
         i, last = g * n, (g + 1) * n - 1
         sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+        spacing = self.gtotal[g] / n
         for j in range(n):
-            v = (self.u1[g] + ti.cast(j, ti.f64)) / n * self.gtotal[g]
+            v = (self.u1[g] + ti.cast(j, ti.f64)) * spacing
             while i < last and self.cum[i] <= v:
                 i += 1
             x, y = self.xp[i], self.yp[i]

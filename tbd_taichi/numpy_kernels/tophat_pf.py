@@ -98,7 +98,9 @@ class TophatPFKernels:
         lw = self.logw[p].reshape(len(live), self.n)
         m = lw.max(axis=1)
         none = m <= F32(NEG_INF)
-        wts = np.where(none[:, None], 1.0, np.exp((lw - m[:, None]).astype(F32).astype(np.float64)))
+        # f32 terms (e^x of an f32 x, rounded from f64 as the libm expf the kernel calls), summed in f64
+        wts = np.where(none[:, None], 1.0, np.exp((lw - m[:, None]).astype(F32).astype(np.float64))
+                   .astype(F32).astype(np.float64))
         cum = np.cumsum(wts, axis=1)
         total, total2 = cum[:, -1], (wts * wts).sum(axis=1)
         self.summary[live, SUM_NEFF] = (total * total / total2).astype(F32)
@@ -108,7 +110,7 @@ class TophatPFKernels:
     def _resample(self, live, p, cum, total, u1) -> None:
         """Alg. 2: the first particle whose c_i exceeds (u₁ + j)/N·Σw, per group."""
         k, n = len(live), self.n
-        v = (u1[:, None] + np.arange(n)) / n * total[:, None]
+        v = (u1[:, None] + np.arange(n)) * (total / n)[:, None]
         offset = (np.arange(k) * 2.0 * (n + 1))[:, None]  # rows apart: c ≤ N, so the rows never interleave
         idx = np.searchsorted((cum + offset).ravel(), (v + offset).ravel(), side="right")
         rows = np.repeat(np.arange(k), n)
