@@ -48,6 +48,7 @@ SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # colum
 # from SUM_ASPECT
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
+LANES = 4  # partial sums of λ (Eq. 15) kept apart
 SERIAL_PIXELS = 1 << 16  # d-maps up to this many pixels are computed in the launching thread (no task start)
 
 
@@ -72,7 +73,9 @@ class MultiaspectKernels:
     def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
         self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
         self.k, th, tw = (int(v) for v in template_shape)
-        self.support = th * tw  # the most non-zero template pixels an aspect can have
+        # the most non-zero template pixels an aspect can have, rounded up to whole LANES (λ's sum reads the
+        # zero padding up to the next multiple)
+        self.support = -(-th * tw // LANES) * LANES
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
         c, g, (h, w) = self.groups * self.n, self.groups, self.shape
         self.capacity = c
@@ -312,10 +315,14 @@ class MultiaspectKernels:
             g = p // self.n
             c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
             r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
-            lam = ti.f32(0.0)
             corner = self.d_index(g, r + hh, c + hw)  # the template's top-left pixel in the padded d
-            for i in range(self.t_count[z - 1]):
-                lam += self.t_val[z - 1, i] * self.d[corner + self.t_off[z - 1, i]]
+            # LANES independent partial sums: one chain of dependent adds would wait out each add's latency
+            part = ti.Vector([0.0] * LANES, dt=ti.f32)
+            for i in range((self.t_count[z - 1] + LANES - 1) // LANES):
+                for u in ti.static(range(LANES)):
+                    j = i * LANES + u
+                    part[u] += self.t_val[z - 1, j] * self.d[corner + self.t_off[z - 1, j]]
+            lam = part.sum()
             e0 = self.energy[0, z - 1, r + hh, c + hw]
             rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
                 - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
