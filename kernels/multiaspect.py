@@ -27,14 +27,14 @@ import numpy as np
 import taichi as ti
 
 from .loops import thread_span
-from .phd import SQRT_HALF, erf
+from .phd import ERF_END, SQRT_HALF, ErfTable, erf
 from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normals_at, uniform_at, uniform_f64_at
 
 STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
 S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
 S_BIRTH_CELL = 13  # a data-driven birth's cell
-ERF_ONE = 4.0  # erf(x) = 1 in f32 for x ≥ this (1 − erf(4) = 1.5·10⁻⁸ < half an f32 ulp of 1)
+ERF_ONE = ERF_END  # erf(x) = 1 in f32 for x ≥ this (1 − erf(4) = 1.5·10⁻⁸ < half an f32 ulp of 1)
 STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
 STAGE_BASE = 1000
 S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
@@ -110,6 +110,7 @@ class MultiaspectKernels:
         self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
         self.blw = ti.field(ti.f32, c)
         self.tables, self.exp_tables = NormalTables.shared(), ExponentialTables.shared()
+        self.erf_table = ErfTable.shared()
         # one group: its serial per-group loops run in the launching thread (a parallel task costs ~0.08 ms to start)
         self.serial_groups = serial or self.groups == 1
         self.span = thread_span(self.serial_groups)
@@ -290,8 +291,9 @@ class MultiaspectKernels:
         near = ti.min(ti.min(w - 0.5 + hw - mx, mx + hw + 0.5), ti.min(h - 0.5 + hh - my, my + hh + 0.5)) * s
         out = ti.f32(1.0)
         if near < ERF_ONE:
-            px = 0.5 * (erf((w - 0.5 + hw - mx) * s) - erf((-hw - 0.5 - mx) * s))
-            py = 0.5 * (erf((h - 0.5 + hh - my) * s) - erf((-hh - 0.5 - my) * s))
+            t = ti.static(self.erf_table.values)
+            px = 0.5 * (erf((w - 0.5 + hw - mx) * s, t) - erf((-hw - 0.5 - mx) * s, t))
+            py = 0.5 * (erf((h - 0.5 + hh - my) * s, t) - erf((-hh - 0.5 - my) * s, t))
             out = px * py
         return out
 

@@ -24,11 +24,13 @@ Sums within a group run serially in one thread (groups in parallel), so results 
 count.  Random numbers are the counter-based ones of ``kernels.rng`` keyed on (seed, frame key, stream, slot).
 The NumPy twin is ``tbd_taichi.numpy_kernels.phd``.
 """
+import math
+
 import numpy as np
 import taichi as ti
 
 from .loops import thread_span
-from .rng import NormalTables, key_prefix, normals_at, uniform_at
+from .rng import NormalTables, key_prefix, normals_at, shared_tables, table_field, uniform_at
 
 DIM = 7
 MAX_MODELS = 4
@@ -37,6 +39,7 @@ LOG_ZERO = -1.0e30  # log ℓ of a particle outside the image
 S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
 S_RESAMPLE = 15
+RESAMPLE_CHUNK = 64  # outputs per thread's walk in resample
 # (row, column) of the entries of F, F⁻¹ (F_SUPPORT) and L (L_SUPPORT) that can be non-zero in any of the models
 # cv, c-ct, ac-ct, ca of tbd_taichi.motion_models (checked there by tests/test_mm_phd_kernels.py): the propagation
 # multiplies only these, 17 and 13 of the 49
@@ -57,15 +60,37 @@ EST_WIDTH = EST_PEAK + 1
 _NP = {ti.f32: np.float32, ti.i32: np.int32}
 
 
+ERF_STEPS = 1024  # erf's table points per unit of x
+ERF_END = 4.0  # erf(x) = 1 in f32 for |x| ≥ this (1 − erf(4) = 1.5·10⁻⁸ < half an f32 ulp of 1)
+
+
+def erf_table_values() -> np.ndarray:
+    """erf(k/ERF_STEPS) for k = 0 … ERF_END·ERF_STEPS + 1 (math.erf, rounded to f32): :func:`erf`'s table."""
+    return np.array([math.erf(k / ERF_STEPS) for k in range(int(ERF_END * ERF_STEPS) + 2)], np.float32)
+
+
+@ti.data_oriented
+class ErfTable:
+    """:func:`erf`'s table as a field (build after ``ti.init``); kernel classes take the :meth:`shared` one."""
+
+    @classmethod
+    def shared(cls) -> "ErfTable":
+        """This program's one instance (``rng.shared_tables``)."""
+        return shared_tables(cls)
+
+    def __init__(self):
+        self.values = table_field(erf_table_values(), ti.f32)
+
+
 @ti.func
-def erf(x: ti.f32) -> ti.f32:
-    """erf(x) by Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5·10⁻⁷): 1 − (a₁t + … + a₅t⁵)·e^(−x²), t = 1/(1 + p|x|),
-    odd in x.  Taichi has no erf."""
-    a = ti.abs(x)
-    t = ti.f32(1.0) / (ti.f32(1.0) + ti.f32(0.3275911) * a)
-    poly = t * (ti.f32(0.254829592) + t * (ti.f32(-0.284496736) + t * (ti.f32(1.421413741)
-                + t * (ti.f32(-1.453152027) + t * ti.f32(1.061405429)))))
-    y = ti.f32(1.0) - poly * ti.exp(-a * a)
+def erf(x: ti.f32, table: ti.template()) -> ti.f32:
+    """erf(x), odd in x, by linear interpolation in ``table`` (:class:`ErfTable`'s values) at steps h = 1/1024:
+    |error| ≤ h²/8·max|erf''| = 1.2·10⁻⁷ plus f32 rounding, 1 for |x| ≥ ERF_END.  Taichi has no erf; a table
+    read costs a third of Abramowitz & Stegun 7.1.26 (an exponential and a division)."""
+    a = ti.min(ti.abs(x) * ti.f32(ERF_STEPS * 1.0), ti.f32(ERF_END * ERF_STEPS))
+    i = ti.cast(a, ti.i32)
+    lo = table[i]
+    y = lo + (a - ti.cast(i, ti.f32)) * (table[i + 1] - lo)
     return ti.select(x < 0, -y, y)
 
 
@@ -96,7 +121,7 @@ class PhdKernels:
         self.F, self.F_inv, self.L = (ti.field(ti.f32, (MAX_MODELS, DIM, DIM)) for _ in range(3))
         # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
         self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
-        self.tables = NormalTables.shared()
+        self.tables, self.erf_table = NormalTables.shared(), ErfTable.shared()
         self.span = thread_span(serial)
 
     # ------------------------------------------------------------------ propagate (Eqs. 1, 26, 28–34)
@@ -196,7 +221,7 @@ class PhdKernels:
         """Eq. 4 along one axis for the 2·half + 1 pixels around ``centre``: ½[erf(edge_{k+1}) − erf(edge_k)] from
         the 2·half + 2 pixel edges' erf (each edge shared by two pixels; the twin's ``pixel_fraction`` takes the
         two per pixel)."""
-        e = ti.Vector([erf((ti.cast(centre + k, ti.f32) - 0.5 - pos) * scale)
+        e = ti.Vector([erf((ti.cast(centre + k, ti.f32) - 0.5 - pos) * scale, self.erf_table.values)
                        for k in ti.static(range(-half, half + 2))], dt=ti.f32)
         return ti.Vector([0.5 * (e[k + 1] - e[k]) for k in ti.static(range(2 * half + 1))], dt=ti.f32)
 
@@ -342,29 +367,41 @@ class PhdKernels:
     def resample(self, seed: ti.u32, frame_key: ti.u32, n_groups: ti.i32, max_out: ti.i32):
         """Systematic resampling: output j of group g is the first slot of g's segment whose cdf exceeds
         (j + u_g)/L_g·total_g (u_g ~ U(0, 1) keyed on g; total_g = 0: the segment taken evenly), copied to slot
-        out_start_g + j of the second buffer with weight out_weight_g and group out_id_g."""
+        out_start_g + j of the second buffer with weight out_weight_g and group out_id_g.  The outputs run in
+        chunks of RESAMPLE_CHUNK, in parallel: a chunk's first output is found by binary search, the next ones
+        by walking on from it (the points rise with j), a step or two each instead of a search."""
         key = key_prefix(seed, frame_key, S_RESAMPLE)
-        for g, j in ti.ndrange(n_groups, max_out):
+        for g, c in ti.ndrange(n_groups, (max_out + RESAMPLE_CHUNK - 1) // RESAMPLE_CHUNK):
             n_out = self.gint[g, OUT_LEN]
-            if j < n_out:
-                a, n = self.gint[g, START], self.gint[g, LENGTH]
-                src = a + (j * n) // n_out
-                if self.gout[g, TOTAL] > 0.0:
-                    target = (ti.cast(j, ti.f32) + uniform_at(key, g)) / ti.cast(n_out, ti.f32) * self.gout[g, TOTAL]
-                    lo, hi = a, a + n - 1
-                    while lo < hi:
-                        mid = (lo + hi) // 2
-                        if self.cdf[mid] > target:
-                            hi = mid
-                        else:
-                            lo = mid + 1
-                    src = lo
+            a, n = self.gint[g, START], self.gint[g, LENGTH]
+            total, u = self.gout[g, TOTAL], uniform_at(key, g)
+            src = -1
+            for j in range(c * RESAMPLE_CHUNK, ti.min((c + 1) * RESAMPLE_CHUNK, n_out)):
+                if total > 0.0:
+                    target = (ti.cast(j, ti.f32) + u) / ti.cast(n_out, ti.f32) * total
+                    if src < 0:
+                        src = self.first_above(a, a + n - 1, target)
+                    while src < a + n - 1 and self.cdf[src] <= target:
+                        src += 1
+                else:
+                    src = a + (j * n) // n_out
                 o = self.gint[g, OUT_START] + j
                 for d in ti.static(range(DIM)):
                     self.state2[o, d] = self.state[src, d]
                 self.model2[o] = self.model[src]
                 self.weight2[o] = self.gflt[g, OUT_WEIGHT]
                 self.group2[o] = self.gint[g, OUT_ID]
+
+    @ti.func
+    def first_above(self, lo: ti.i32, hi: ti.i32, target: ti.f32) -> ti.i32:
+        """The first slot of [lo, hi] whose cdf exceeds ``target`` (hi if none), by binary search."""
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.cdf[mid] > target:
+                hi = mid
+            else:
+                lo = mid + 1
+        return lo
 
     @ti.kernel
     def commit(self, total: ti.i32):

@@ -4,24 +4,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.phd import (BETA_ROW, CX, CY, NO_CENTRE, RADIUS, DIM, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT,
+from ..kernels.phd import (BETA_ROW, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB,
+                           EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOP, TOTAL)
 from .rng import normal, uniform
 
 F32 = np.float32
-# Abramowitz & Stegun 7.1.26
-_P, _A = F32(0.3275911), [F32(v) for v in (0.254829592, -0.284496736, 1.421413741, -1.453152027, 1.061405429)]
+_ERF = erf_table_values()
 
 
 def erf(x) -> np.ndarray:
-    """float32 erf by Abramowitz & Stegun 7.1.26, as the kernels' ``erf``."""
+    """float32 erf by linear interpolation in the kernels' table, as the kernels' ``erf``."""
     x = np.asarray(x, F32)
-    a = np.abs(x)
-    t = F32(1.0) / (F32(1.0) + _P * a)
-    poly = t * (_A[0] + t * (_A[1] + t * (_A[2] + t * (_A[3] + t * _A[4]))))
-    y = F32(1.0) - poly * np.exp(-a * a)
+    a = np.minimum(np.abs(x) * F32(ERF_STEPS), F32(ERF_END * ERF_STEPS))
+    i = a.astype(np.int32)
+    lo = _ERF[i]
+    y = lo + (a - i.astype(F32)) * (_ERF[i + 1] - lo)
     return np.where(x < 0, -y, y).astype(F32)
 
 
