@@ -48,7 +48,7 @@ def gabor_taps(sigma_x: float, sigma_y: float, omega: float) -> tuple[np.ndarray
 def histogram_work(n: int, half_x: float, half_y: float) -> int:
     """The histograms' work of one :meth:`FeatureFusionKernels.step`: n particles × the window's pixels.  Up to
     ``SERIAL_WORK`` the step runs its particle loops in one thread on the CPU backend (``backend.serial_loops``: a
-    parallel loop's start, tens of µs there, would cost more than it saves; docs/performance.md#feature-fusion-issue-39)."""
+    parallel loop's start, tens of µs there, would cost more than it saves; docs/performance-history.md#feature-fusion-issue-39)."""
     return n * (2 * math.floor(half_x) + 1) * (2 * math.floor(half_y) + 1)
 
 

@@ -13,7 +13,7 @@ holds the GIL while a kernel runs, so threads cannot overlap the two.)  Where th
 its CPU workers (``backend.init``), the child runs one thread on the last worker's CPU at idle
 priority (``backend.run_in_background``): it takes only the time the tracker leaves that CPU,
 mostly while this process runs serial code, and a worker that wakes for a parallel loop does not
-wait for it (faster per frame than one process; docs/performance.md has the figures).  Frames pass
+wait for it (faster per frame than one process; docs/performance-history.md has the figures).  Frames pass
 through shared memory; the results are the same bits, one frame later.
 """
 from __future__ import annotations
