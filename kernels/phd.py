@@ -30,7 +30,7 @@ import numpy as np
 import taichi as ti
 
 from .loops import thread_span
-from .rng import NormalTables, key_prefix, normals_at, shared_tables, table_field, uniform_at
+from .rng import NormalTables, SharedTables, key_prefix, normals_at, table_field, uniform_at
 
 DIM = 7
 MAX_MODELS = 4
@@ -70,13 +70,8 @@ def erf_table_values() -> np.ndarray:
 
 
 @ti.data_oriented
-class ErfTable:
-    """:func:`erf`'s table as a field (build after ``ti.init``); kernel classes take the :meth:`shared` one."""
-
-    @classmethod
-    def shared(cls) -> "ErfTable":
-        """This program's one instance (``rng.shared_tables``)."""
-        return shared_tables(cls)
+class ErfTable(SharedTables):
+    """:func:`erf`'s table as a field (``values``)."""
 
     def __init__(self):
         self.values = table_field(erf_table_values(), ti.f32)

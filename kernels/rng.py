@@ -89,15 +89,18 @@ def shared_tables(cls):
     return entry[1]
 
 
-@ti.data_oriented
-class NormalTables:
-    """The ziggurat tables as fields (build after ``ti.init``); pass ``w, k, phi`` to :func:`normal_at`.
-    Kernel classes take :meth:`shared` ones."""
+class SharedTables:
+    """Constant tables as fields, built after ``ti.init``: kernel classes take the :meth:`shared` instance."""
 
     @classmethod
-    def shared(cls) -> "NormalTables":
-        """This program's one instance (:func:`shared_tables`)."""
+    def shared(cls):
+        """This program's one instance of the class (:func:`shared_tables`)."""
         return shared_tables(cls)
+
+
+@ti.data_oriented
+class NormalTables(SharedTables):
+    """The ziggurat tables as fields; pass ``w, k, phi`` to :func:`normal_at`."""
 
     def __init__(self):
         w, k, phi = ziggurat_tables()
@@ -105,13 +108,8 @@ class NormalTables:
 
 
 @ti.data_oriented
-class ExponentialTables:
+class ExponentialTables(SharedTables):
     """The exponential ziggurat's tables as fields; pass ``w, k, f`` to :func:`exponential_at`."""
-
-    @classmethod
-    def shared(cls) -> "ExponentialTables":
-        """This program's one instance (:func:`shared_tables`)."""
-        return shared_tables(cls)
 
     def __init__(self):
         w, k, f = exponential_tables()
