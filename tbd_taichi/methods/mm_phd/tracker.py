@@ -64,6 +64,9 @@ class Target:
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     velocity_sd: float = 0.0
     mass: float = 1.0
+    last_frame: int = -1  # the last tracked frame, and the position and velocity there
+    last_position: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    last_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def follow(self, mean: np.ndarray, cov: np.ndarray, mass: float, T: float) -> None:
         """The class estimate of this frame: position, velocity (px/s) and its largest standard deviation; an
@@ -135,6 +138,7 @@ class MMPHDTracker(OneSequence):
         self.online_rows: list[tuple] = []
         self.n_hat_history: list[float] = []
         self.confirmations: dict[int, int] = {}
+        self.halted: list[Target] = []  # confirmed tracks halted in the last revive_frames frames
         self.clock = StageClock(STAGES)
         self._backward = None
 
@@ -156,7 +160,7 @@ class MMPHDTracker(OneSequence):
             n_hat, est = self._filter_step(k, z)
         with self.clock("extraction"):
             released = self._bookkeeping(k, n_hat, est)
-            self._resample_and_capture(k, n_hat)
+            released += self._resample_and_capture(k, n_hat)
         self.n_hat_history.append(float(n_hat[0]))
         self.frame += 1
         self.online_rows.extend(released)
@@ -211,6 +215,7 @@ class MMPHDTracker(OneSequence):
             t.mass = e.peak
             if e.peak >= p.drop_below:
                 t.drops = 0
+                t.last_frame, t.last_position, t.last_velocity = k, t.position.copy(), t.velocity.copy()
                 # a tentative track counts strong frames: a strong peak cell holding most of its PHD mass
                 t.streak += t.confirmed or (e.peak >= p.confirm_above and e.mass >= p.confirm_share * total)
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
@@ -253,9 +258,11 @@ class MMPHDTracker(OneSequence):
             back = self._backward.rows(t.capture, earlier, t.track_id)
         t.rows[:0] = [self._row(f, t.track_id, mean, probs, nh) for f, mean, probs, nh in reversed(back)]
 
-    def _resample_and_capture(self, k: int, n_hat: np.ndarray) -> None:
+    def _resample_and_capture(self, k: int, n_hat: np.ndarray) -> list[tuple]:
         """The detector's captures (before resampling), then every filter resampled to L_max (ended trackers
-        dropped; a tracker's mass at most one target), then the captures become trackers."""
+        dropped; a tracker's mass at most one target), then the captures become trackers: tentative ones, or the
+        continuation of a confirmed track that halted within revive_frames near there (:meth:`_revived`); returns
+        the rows of the continued tracks."""
         p, L = self.p, self.p.max_particles
         det_len = int(self.pool.gint[0, LENGTH])
         found = self._captures(k, n_hat[0], det_len) \
@@ -268,15 +275,19 @@ class MMPHDTracker(OneSequence):
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(t.rows)
+                self.halted.append(t)
+        self.halted = [t for t in self.halted if k - t.last_frame <= p.revive_frames]
         self.targets = [t for t in self.targets if not t.halted]
         for t in self.targets:
             t.count = L
         self.det_count = L
         rng = np.random.default_rng([self.seed, k, 1])
+        released = []
         for c in found:
             if len(self.targets) >= p.max_tracks:
                 break
-            t = Target(self.next_id, c, k, L)
+            old = self._revived(k, c)
+            t = Target(self.next_id if old is None else old.track_id, c, k, L)
             t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
             t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
             t.rows.append(self._row(k, t.track_id, c.mean, c.probs, min(c.mass, 1.0)))
@@ -284,7 +295,26 @@ class MMPHDTracker(OneSequence):
             self.pool.load(offset, state, model, 1.0 / L, len(self.targets) + 1)
             offset += L
             self.targets.append(t)
-            self.next_id += 1
+            if old is None:
+                self.next_id += 1
+            else:
+                t.confirmed, t.streak = True, p.confirm_frames
+                released.append(t.rows[-1])
+        return released
+
+    def _revived(self, k: int, c: Capture) -> Target | None:
+        """The confirmed track that halted at most revive_frames frames ago whose predicted position lies within
+        its gate (the class radius + gate_sigmas velocity standard deviations × the time since) of capture c,
+        taken off the halted list; None if there is none."""
+        T = self.p.frame_interval
+        for i, t in enumerate(self.halted):
+            if k - t.last_frame > self.p.revive_frames:
+                continue
+            dt = (k - t.last_frame) * T
+            gate = self.d.class_radius + self.p.gate_sigmas * t.velocity_sd * dt
+            if np.hypot(*(c.mean[[X, Y]] - (t.last_position + t.last_velocity * dt))) <= gate:
+                return self.halted.pop(i)
+        return None
 
     def _captures(self, k: int, n_hat: float, det_len: int) -> list[Capture]:
         """k-means on the detector's PHD (:func:`captures`); the classes whose peak cell holds PHD mass ≥
