@@ -52,6 +52,12 @@ LANES = 4  # partial sums of λ (Eq. 15) kept apart
 SERIAL_PIXELS = 1 << 16  # d-maps up to this many pixels are computed in the launching thread (no task start)
 
 
+def template_support(th: int, tw: int) -> int:
+    """The most non-zero pixels an aspect of a th × tw template can have, rounded up to whole LANES (λ's sum reads
+    the zero padding up to the next multiple)."""
+    return -(-th * tw // LANES) * LANES
+
+
 def template_pixels(templates: np.ndarray, support: int, row_length: int) -> tuple:
     """Each aspect's non-zero pixels, padded to ``support``: (offsets, values, counts), (K, support) arrays and (K,),
     an offset being row·``row_length`` + column from the template's corner (the padded d's rows are
@@ -73,9 +79,7 @@ class MultiaspectKernels:
     def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
         self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
         self.k, th, tw = (int(v) for v in template_shape)
-        # the most non-zero template pixels an aspect can have, rounded up to whole LANES (λ's sum reads the
-        # zero padding up to the next multiple)
-        self.support = -(-th * tw // LANES) * LANES
+        self.support = template_support(th, tw)
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
         c, g, (h, w) = self.groups * self.n, self.groups, self.shape
         self.capacity = c

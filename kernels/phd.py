@@ -30,6 +30,7 @@ import numpy as np
 import taichi as ti
 
 from .loops import thread_span
+from .particles.layout import first_above
 from .rng import NormalTables, SharedTables, key_prefix, normals_at, table_field, uniform_at
 
 DIM = 7
@@ -151,7 +152,11 @@ class PhdKernels:
                 self.model[p] = r
                 n = normals_at(self.tables.w, self.tables.k, self.tables.phi, keys, p)
                 x = ti.Vector([self.state[p, d] for d in ti.static(range(DIM))], dt=ti.f32)
-                fx = self.transition(self.F_inv, r, x) if backward != 0 else self.transition(self.F, r, x)
+                fx = ti.Vector([0.0] * DIM, dt=ti.f32)
+                if backward != 0:  # a statement, not a conditional expression: only one product is computed
+                    fx = self.transition(self.F_inv, r, x)
+                else:
+                    fx = self.transition(self.F, r, x)
                 ln = self.transition(self.L, r, n, L_SUPPORT)
                 s = ti.sqrt(self.gflt[g, QSCALE])
                 for i in ti.static(range(DIM)):
@@ -364,7 +369,8 @@ class PhdKernels:
         (j + u_g)/L_g·total_g (u_g ~ U(0, 1) keyed on g; total_g = 0: the segment taken evenly), copied to slot
         out_start_g + j of the second buffer with weight out_weight_g and group out_id_g.  The outputs run in
         chunks of RESAMPLE_CHUNK, in parallel: a chunk's first output is found by binary search, the next ones
-        by walking on from it (the points rise with j), a step or two each instead of a search."""
+        by walking on from it (the points rise with j), a step or two each instead of a search.  ``max_out`` must
+        be at least every group's L_g."""
         key = key_prefix(seed, frame_key, S_RESAMPLE)
         for g, c in ti.ndrange(n_groups, (max_out + RESAMPLE_CHUNK - 1) // RESAMPLE_CHUNK):
             n_out = self.gint[g, OUT_LEN]
@@ -375,7 +381,7 @@ class PhdKernels:
                 if total > 0.0:
                     target = (ti.cast(j, ti.f32) + u) / ti.cast(n_out, ti.f32) * total
                     if src < 0:
-                        src = self.first_above(a, a + n - 1, target)
+                        src = first_above(self.cdf, a, a + n - 1, target)
                     while src < a + n - 1 and self.cdf[src] <= target:
                         src += 1
                 else:
@@ -386,17 +392,6 @@ class PhdKernels:
                 self.model2[o] = self.model[src]
                 self.weight2[o] = self.gflt[g, OUT_WEIGHT]
                 self.group2[o] = self.gint[g, OUT_ID]
-
-    @ti.func
-    def first_above(self, lo: ti.i32, hi: ti.i32, target: ti.f32) -> ti.i32:
-        """The first slot of [lo, hi] whose cdf exceeds ``target`` (hi if none), by binary search."""
-        while lo < hi:
-            mid = (lo + hi) // 2
-            if self.cdf[mid] > target:
-                hi = mid
-            else:
-                lo = mid + 1
-        return lo
 
     @ti.kernel
     def commit(self, total: ti.i32):

@@ -206,7 +206,7 @@ def normal_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti
 
 @ti.func
 def normals_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefixes: ti.template(), index):
-    """One N(0, 1) variate per key prefix of the static list ``prefixes`` (a ti.f32 vector), each equal to
+    """One N(0, 1) variate per key prefix (u32) of the Python list ``prefixes``, as a ti.f32 vector, each equal to
     ``normal_at(w, k, phi, prefixes[d], index)``.  The fast draws run for every prefix; the slow path
     (:func:`normal_rejection`, taken by 1.2 % of the variates) has one call site, in a loop over the rejected
     ones, so a kernel that draws several normals per particle compiles it once instead of once per variate."""

@@ -17,7 +17,7 @@ Three costs of Taichi 1.7's front end that do not change what it builds:
 :func:`install` applies all three unless debug mode is on (then Taichi's full messages are kept); it checks the private
 names it replaces first and leaves Taichi as it is where they differ, so a Taichi upgrade costs speed, not
 correctness.  ``tests/test_compile_speed.py`` checks that the names exist and that the kernels are unchanged.
-The measured effect is in ``docs/performance.md`` (start-up)."""
+The measured effect is in ``docs/performance-history.md`` (start-up), today's figures in ``docs/performance.md``."""
 from __future__ import annotations
 
 import ast

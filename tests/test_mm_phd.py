@@ -96,12 +96,13 @@ def test_tracker_mass_on_a_target_and_after_it_vanishes():
 
 
 
+@pytest.mark.slow
 def test_a_capture_near_a_just_halted_confirmed_track_continues_it():
-    """revive_frames: a capture within the gate of where a confirmed track halted (its last tracked position moved
-    on by its velocity) at most revive_frames frames before takes that track's id; one outside the gate, or
-    later, or with revive_frames = 0 (the paper) starts a new track.  Over 20 §5.3 runs continuing does not
-    add fragments (tracks of a target left out of the association: 11 → 9 here, 85 → 65 over 100 runs) and
-    keeps the detected run × targets within 2 of 60."""
+    """revive_frames: a capture within the gate of a lost confirmed track (its last tracked position moved on by
+    its velocity), 1 … revive_frames frames after its last tracked frame, takes that track's id, the nearest such
+    track if several; in the same frame, later, outside the gate or with revive_frames = 0 (the paper) it starts a
+    new track.  Over 20 §5.3 runs continuing lowers the fragments (tracks of a target left out of the
+    association: 11 → 9 here, 85 → 67 over 100 runs) and keeps the detected run × targets within 2 of 60."""
     from tbd_taichi.methods.mm_phd.estimation import Capture
     from tbd_taichi.methods.mm_phd.tracker import Target
 
@@ -110,13 +111,17 @@ def test_a_capture_near_a_just_halted_confirmed_track_continues_it():
         mean[[0, 2]] = x, y
         return Capture(np.zeros((1, 7)), np.zeros(1, np.int32), mean, np.eye(7), np.ones(3) / 3, 1.0)
 
+    def lost(track_id, x, vx):
+        return Target(track_id, capture_at(x, 10), 2, 10, confirmed=True, last_frame=5, velocity_sd=0.1,
+                      last_position=np.array([x, 10.0]), last_velocity=np.array([vx, 0.0]))
+
     tr = tbd.make_tracker("mm-phd", (40, 40), seed=0, revive_frames=3).tracker
-    old = Target(7, capture_at(10, 10), 2, 10, confirmed=True, last_frame=5, velocity_sd=0.1,
-                 last_position=np.array([10.0, 10.0]), last_velocity=np.array([1.0, 0.0]))
-    tr.halted = [old]
+    old, other = lost(7, 10.0, 1.0), lost(8, 16.0, -1.0)
+    tr.halted = [old, other]
+    assert tr._revived(5, capture_at(10.0, 10.0)) is None  # its own last frame
     assert tr._revived(9, capture_at(14.2, 10.3)) is None  # 4 frames on: too late
-    assert tr._revived(7, capture_at(20.0, 10.0)) is None  # outside the gate
-    assert tr._revived(7, capture_at(12.3, 10.4)) is old and tr.halted == []  # at 10 + 2·1 px: continued
+    assert tr._revived(7, capture_at(30.0, 10.0)) is None  # outside both gates
+    assert tr._revived(7, capture_at(12.3, 10.4)) is old and tr.halted == [other]  # 10 + 2·1 px: the nearer
     tr.p = dataclasses.replace(tr.p, revive_frames=0)
     tr.halted = [old]
     assert tr._revived(6, capture_at(11.0, 10.0)) is None
@@ -124,7 +129,7 @@ def test_a_capture_near_a_just_halted_confirmed_track_continues_it():
     for frames in (0, 3):
         res = [run("5.3", seed, revive_frames=frames)[3] for seed in range(20)]
         pooled[frames] = (sum(r["unassociated_tracks"] for r in res), sum(r["detected"] for r in res))
-    assert pooled[3][0] <= pooled[0][0]
+    assert pooled[3][0] < pooled[0][0]
     assert abs(pooled[3][1] - pooled[0][1]) <= 2
 
 def test_tracks_table_carries_model_probabilities():

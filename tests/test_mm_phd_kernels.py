@@ -9,7 +9,8 @@ from scipy import integrate, special, stats
 
 from tbd_taichi.kernels import phd as tk
 from tbd_taichi.motion_models import MODELS, model_set, process_noise, transition, turn_block
-from tbd_taichi.methods.mm_phd.pool import model_cdf, padded
+from tbd_taichi.errors import ParameterError
+from tbd_taichi.methods.mm_phd.pool import check_support, model_cdf, padded
 from tbd_taichi.numpy_kernels import phd as nk
 
 PI_EQ39 = np.array([[0.8, 0.1, 0.1], [0.3, 0.6, 0.1], [0.3, 0.1, 0.6]])
@@ -125,6 +126,11 @@ def test_erf_against_scipy():
     fill(x, out)
     assert np.max(np.abs(out.to_numpy() - ref)) < 3e-7
     np.testing.assert_array_equal(out.to_numpy(), nk.erf(x))
+    odd = np.array([np.inf, -np.inf, np.nan, 1e30, -1e30], np.float32)  # ±1 at the table's end; NaN reads it too
+    out = ti.ndarray(ti.f32, odd.size)
+    fill(odd, out)
+    np.testing.assert_array_equal(out.to_numpy(), nk.erf(odd))
+    np.testing.assert_array_equal(nk.erf(odd)[[0, 1, 3, 4]], [1, -1, 1, -1])
 
 
 @pytest.mark.parametrize("pos,sigma", [(3.3, 0.7), (0.05, 0.6), (-0.4, 1.2)])
@@ -205,13 +211,17 @@ def test_motion_matrices_follow_kinematics():
 @pytest.mark.parametrize("T, omega", [(1.0, math.pi / 10), (2.0, -0.3), (0.37, 2.9)])
 def test_propagation_support_holds_every_model(T, omega):
     """The propagate kernel multiplies only F_SUPPORT's entries of F and F⁻¹ and L_SUPPORT's of L: every other
-    entry of every model's matrices is exactly zero, whatever T, ω and the noise densities."""
+    entry of every model's matrices is exactly zero, whatever T, ω and the noise densities (check_support passes),
+    no entry is kept in vain, and a matrix with an entry outside is refused."""
     ms = model_set(",".join(MODELS), T, omega, 0.37, 0.05)
+    check_support(ms)
     for name, support in (("F", tk.F_SUPPORT), ("F_inv", tk.F_SUPPORT), ("L", tk.L_SUPPORT)):
-        outside = np.ones((7, 7), bool)
-        outside[tuple(np.array(support).T)] = False
-        assert np.all(ms[name][:, outside] == 0.0), name
-        assert np.all(np.abs(ms[name][:, ~outside]).max(axis=0) > 0), name  # no entry kept in vain
+        kept = np.abs(ms[name]).max(axis=0)[tuple(np.array(support).T)]
+        assert np.all(kept > 0), name
+        bad = {k: v.copy() for k, v in ms.items()}
+        bad[name][0, 4, 0] = 0.5  # intensity from x: outside every support
+        with pytest.raises(ParameterError, match=name):
+            check_support(bad)
 
 def moved(engine_pool, n, model, qscale=1.0, frame_key=5):
     """n particles at a fixed state, all of ``model``, propagated once with Π = identity."""

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..kernels.multiaspect import (ERF_ONE, GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
                                    LAW, STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
-from ..kernels.multiaspect import LANES, template_pixels
+from ..kernels.multiaspect import template_pixels, template_support
 from ..kernels.phd import SQRT_HALF
 from .phd import erf
 from .rng import exponential, normal, uniform, uniform_f64
@@ -33,7 +33,7 @@ class MultiaspectKernels:
         self.d = np.zeros((g, h + 4 * hh, w + 4 * hw), F32)  # zero border of twice the half sizes, as the kernels'
         self.gpar = np.zeros((g, len(GPAR)), F32)
         self.motion, self.law = np.zeros(3, F32), np.zeros(len(LAW), F32)
-        self.support = -(-th * tw // LANES) * LANES
+        self.support = template_support(th, tw)
         self.t_off, self.t_val = np.zeros((self.k, self.support), np.int32), np.zeros((self.k, self.support), F32)
         self.t_count = np.zeros(self.k, np.int32)
         self.energy = np.zeros((3, self.k, h + th - 1, w + tw - 1), F32)

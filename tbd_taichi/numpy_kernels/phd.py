@@ -18,7 +18,7 @@ _ERF = erf_table_values()
 def erf(x) -> np.ndarray:
     """float32 erf by linear interpolation in the kernels' table, as the kernels' ``erf``."""
     x = np.asarray(x, F32)
-    a = np.minimum(np.abs(x) * F32(ERF_STEPS), F32(ERF_END * ERF_STEPS))
+    a = np.fmin(np.abs(x) * F32(ERF_STEPS), F32(ERF_END * ERF_STEPS))  # NaN reads the end, as the kernel's min
     i = a.astype(np.int32)
     lo = _ERF[i]
     y = lo + (a - i.astype(F32)) * (_ERF[i + 1] - lo)

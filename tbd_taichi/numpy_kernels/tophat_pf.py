@@ -108,7 +108,7 @@ class TophatPFKernels:
         return cum, total, uniform_f64(self.seed, frame, S_RESAMPLE, live)
 
     def _resample(self, live, p, cum, total, u1) -> None:
-        """Alg. 2: the first particle whose c_i exceeds (u₁ + j)/N·Σw, per group."""
+        """Alg. 2: the first particle whose c_i exceeds (u₁ + j)·(Σw/N), per group."""
         k, n = len(live), self.n
         v = (u1[:, None] + np.arange(n)) * (total / n)[:, None]
         offset = (np.arange(k) * 2.0 * (n + 1))[:, None]  # rows apart: c ≤ N, so the rows never interleave

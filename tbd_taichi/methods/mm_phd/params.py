@@ -78,9 +78,10 @@ class MMPHDParams:
     confirm_frames: int = param(3, doc="consecutive tracked frames that confirm a track", source="§4.2", low=1,
                                 high=100)
     halt_drops: int = param(2, doc="consecutive dropped frames that halt a tracker", source="§4.2", low=1, high=100)
-    revive_frames: int = param(3, doc="a capture near where a confirmed track halted at most this many frames "
-                               "before continues that track (its id, confirmed) instead of starting a tentative "
-                               "one; 0: every capture is a new track, as in the paper", unit="frames",
+    revive_frames: int = param(3, doc="a capture near a lost confirmed track whose last tracked frame is at most "
+                               "this many frames before continues that track (its id, confirmed) instead of "
+                               "starting a tentative one; 0: every capture is a new track, as in the paper",
+                               unit="frames",
                                source="not in the paper", low=0, high=100)
     drop_below: float = param(0.5, doc="a tracker drops the frame when its class's peak cell holds PHD mass "
                               "Ψ/(λ + Ψ) below this; a detector class below it is no capture", symbol="n̂",

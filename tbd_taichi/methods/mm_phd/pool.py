@@ -7,8 +7,9 @@ import numpy as np
 from ... import backend
 from ...engines import kernel_module
 from ...launch import Launcher
-from ...kernels.phd import (CX, CY, FRAME, GROUP_FLOAT, GROUP_INT, LENGTH, NO_CENTRE, OUT_ID, OUT_LEN,
-                             N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
+from ...errors import ParameterError
+from ...kernels.phd import (CX, CY, F_SUPPORT, FRAME, GROUP_FLOAT, GROUP_INT, L_SUPPORT, LENGTH, NO_CENTRE,
+                             OUT_ID, OUT_LEN, N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
 from ...motion_models import DIM, model_set
 from .params import P_DETECT, Derived, MMPHDParams
 
@@ -24,6 +25,17 @@ def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
     out[MAX_MODELS, :n] = np.cumsum(birth)
     out[:, n - 1:] = 1.0  # the last model takes what rounding leaves
     return out
+
+
+def check_support(ms: dict) -> None:
+    """The propagation kernel multiplies only ``kernels.phd``'s F_SUPPORT entries of F and F⁻¹ and L_SUPPORT's of
+    L: a model set with another non-zero entry is an error (a new motion model must widen the supports)."""
+    for name, support in (("F", F_SUPPORT), ("F_inv", F_SUPPORT), ("L", L_SUPPORT)):
+        outside = np.ones(ms[name].shape[1:], bool)
+        outside[tuple(np.array(support).T)] = False
+        if np.any(ms[name][:, outside] != 0):
+            raise ParameterError(f"motion models: {name} has non-zero entries outside kernels.phd's "
+                                 f"{'L' if name == 'L' else 'F'}_SUPPORT; widen the support for the new model")
 
 
 def padded(matrices: np.ndarray) -> np.ndarray:
@@ -48,6 +60,7 @@ class PhdPool:
         self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
+        check_support(ms)
         for name in ("F", "F_inv", "L"):
             self.k.put(name, padded(ms[name]))
         self.k.put("model_cdf", model_cdf(d.switch, d.birth_models))

@@ -275,7 +275,8 @@ class MMPHDTracker(OneSequence):
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(t.rows)
-                self.halted.append(t)
+                if t.drops >= p.halt_drops:  # lost, not halted as another track's duplicate
+                    self.halted.append(t)
         self.halted = [t for t in self.halted if k - t.last_frame <= p.revive_frames]
         self.targets = [t for t in self.targets if not t.halted]
         for t in self.targets:
@@ -290,6 +291,7 @@ class MMPHDTracker(OneSequence):
             t = Target(self.next_id if old is None else old.track_id, c, k, L)
             t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
             t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
+            t.last_frame, t.last_position, t.last_velocity = k, t.position.copy(), t.velocity.copy()
             t.rows.append(self._row(k, t.track_id, c.mean, c.probs, min(c.mass, 1.0)))
             state, model = tracker_start(c, L, p.vmax, p.fresh_velocity, rng)
             self.pool.load(offset, state, model, 1.0 / L, len(self.targets) + 1)
@@ -303,18 +305,20 @@ class MMPHDTracker(OneSequence):
         return released
 
     def _revived(self, k: int, c: Capture) -> Target | None:
-        """The confirmed track that halted at most revive_frames frames ago whose predicted position lies within
-        its gate (the class radius + gate_sigmas velocity standard deviations × the time since) of capture c,
-        taken off the halted list; None if there is none."""
-        T = self.p.frame_interval
-        for i, t in enumerate(self.halted):
-            if k - t.last_frame > self.p.revive_frames:
+        """The lost confirmed track, last tracked 1 … revive_frames frames before k, whose position there moved on by
+        its velocity lies nearest capture c within its gate (the class radius + gate_sigmas velocity standard
+        deviations × the time since), taken off the halted list; None if there is none or revive_frames is 0."""
+        T, best, dist = self.p.frame_interval, None, np.inf
+        for t in self.halted:
+            if not 0 < k - t.last_frame <= self.p.revive_frames:
                 continue
             dt = (k - t.last_frame) * T
-            gate = self.d.class_radius + self.p.gate_sigmas * t.velocity_sd * dt
-            if np.hypot(*(c.mean[[X, Y]] - (t.last_position + t.last_velocity * dt))) <= gate:
-                return self.halted.pop(i)
-        return None
+            d = float(np.hypot(*(c.mean[[X, Y]] - (t.last_position + t.last_velocity * dt))))
+            if d <= self.d.class_radius + self.p.gate_sigmas * t.velocity_sd * dt and d < dist:
+                best, dist = t, d
+        if best is not None:
+            self.halted.remove(best)
+        return best
 
     def _captures(self, k: int, n_hat: float, det_len: int) -> list[Capture]:
         """k-means on the detector's PHD (:func:`captures`); the classes whose peak cell holds PHD mass ≥
