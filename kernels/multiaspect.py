@@ -34,7 +34,6 @@ STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
 S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
 S_BIRTH_CELL = 13  # a data-driven birth's cell
-ERF_ONE = ERF_END  # erf(x) = 1 in f32 for x ≥ this (1 − erf(4) = 1.5·10⁻⁸ < half an f32 ulp of 1)
 STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
 STAGE_BASE = 1000
 S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
@@ -288,13 +287,13 @@ class MultiaspectKernels:
     @ti.func
     def p_inside(self, mx: ti.f32, my: ti.f32, sd: ti.f32) -> ti.f32:
         """P_in of Eq. 6 (notes A1): Φ-differences of the extended grid's edges around the predicted (mx, my);
-        exactly 1 in f32 when every edge is ≥ ERF_ONE/s away (erf is then 1 to f32 precision), so erf is skipped."""
+        exactly 1 in f32 when every edge is ≥ ERF_END/s away (erf is then 1 to f32 precision), so erf is skipped."""
         h, w = ti.static(self.shape)
         hh, hw = ti.static(self.halves)
         s = ti.f32(SQRT_HALF) / ti.max(sd, 1e-12)
         near = ti.min(ti.min(w - 0.5 + hw - mx, mx + hw + 0.5), ti.min(h - 0.5 + hh - my, my + hh + 0.5)) * s
         out = ti.f32(1.0)
-        if near < ERF_ONE:
+        if near < ERF_END:
             t = ti.static(self.erf_table.values)
             px = 0.5 * (erf((w - 0.5 + hw - mx) * s, t) - erf((-hw - 0.5 - mx) * s, t))
             py = 0.5 * (erf((h - 0.5 + hh - my) * s, t) - erf((-hh - 0.5 - my) * s, t))

@@ -193,23 +193,18 @@ def normal_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti
 
     Draw d hashes index·ZIG_TRIES + d: bits 0–6 pick layer i, bit 7 the sign, bits 9–31 the
     position u = (2m + 1)·2^-24 and x = u·x_i.  Accept at once if m < k_i (x under the curve: 98.8 %);
-    the rest goes to :func:`normal_rejection`.  One hash and a table lookup for most variates."""
-    base = ti.cast(index, ti.u32) * ti.u32(ZIG_TRIES)
-    h = hash_index(prefix, base)
-    i = ti.cast(h & ti.u32(ZIG_LAYERS - 1), ti.i32)
-    out = zig_signed(h, unit_from_bits(h) * w[i])
-    if (h >> 9) >= k[i]:
-        out = normal_rejection(w, k, phi, prefix, base, h)
-    return out
-
+    the rest goes to :func:`normal_rejection`.  One hash and a table lookup for most variates
+    (:func:`normals_at` with this one prefix)."""
+    return normals_at(w, k, phi, [prefix], index)[0]
 
 
 @ti.func
 def normals_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefixes: ti.template(), index):
     """One N(0, 1) variate per key prefix (u32) of the Python list ``prefixes``, as a ti.f32 vector, each equal to
-    ``normal_at(w, k, phi, prefixes[d], index)``.  The fast draws run for every prefix; the slow path
-    (:func:`normal_rejection`, taken by 1.2 % of the variates) has one call site, in a loop over the rejected
-    ones, so a kernel that draws several normals per particle compiles it once instead of once per variate."""
+    ``normal_at(w, k, phi, prefixes[d], index)`` (the ziggurat described there).  The fast draws run for every
+    prefix; the slow path (:func:`normal_rejection`, taken by 1.2 % of the variates) has one call site, in a loop
+    over the rejected ones, so a kernel that draws several normals per particle compiles it once instead of once
+    per variate."""
     n = ti.static(len(prefixes))
     base = ti.cast(index, ti.u32) * ti.u32(ZIG_TRIES)
     out = ti.Vector([0.0] * n, dt=ti.f32)
@@ -232,6 +227,7 @@ def normals_at(w: ti.template(), k: ti.template(), phi: ti.template(), prefixes:
                     if d == e:
                         out[e] = x
     return out
+
 
 @ti.func
 def normal_rejection(w: ti.template(), k: ti.template(), phi: ti.template(), prefix: ti.u32, base: ti.u32,

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.multiaspect import (ERF_ONE, GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
+from ..kernels.multiaspect import (GPAR, S_ASPECT, S_BIRTH_CELL, S_DRAW, S_ENTER, S_EXIT, S_F0, S_MOVE, S_NOISE, S_PRIOR,
                                    LAW, STAGE_BASE, STAGE_STREAMS, STATE, SUM_ABSENT, SUM_ASPECT, SUM_X)
 from ..kernels.multiaspect import template_pixels, template_support
-from ..kernels.phd import SQRT_HALF
+from ..kernels.phd import ERF_END, SQRT_HALF
 from .phd import erf
 from .rng import exponential, normal, uniform, uniform_f64
 
@@ -111,12 +111,12 @@ class MultiaspectKernels:
         return (c >= -hw) & (c < w + hw) & (r >= -hh) & (r < h + hh)
 
     def _p_inside(self, mx: np.ndarray, my: np.ndarray, sd: float) -> np.ndarray:
-        """P_in of Eq. 6; 1 where every edge is ≥ ERF_ONE/s away (see the kernel)."""
+        """P_in of Eq. 6; 1 where every edge is ≥ ERF_END/s away (see the kernel)."""
         (h, w), (hh, hw) = self.shape, self.halves
         s = F32(SQRT_HALF) / F32(max(sd, 1e-12))
         half = F32(0.5)
         near = np.minimum(np.minimum(F32(w - 0.5 + hw) - mx, mx + F32(hw + 0.5)),
-                          np.minimum(F32(h - 0.5 + hh) - my, my + F32(hh + 0.5))) * s < F32(ERF_ONE)
+                          np.minimum(F32(h - 0.5 + hh) - my, my + F32(hh + 0.5))) * s < F32(ERF_END)
         out = np.ones(len(mx), F32)
         x, y = mx[near], my[near]
         px = half * (erf((F32(w - 0.5 + hw) - x) * s) - erf((F32(-hw - 0.5) - x) * s))

@@ -81,8 +81,7 @@ class MMPHDParams:
     revive_frames: int = param(3, doc="a capture near a lost confirmed track whose last tracked frame is at most "
                                "this many frames before continues that track (its id, confirmed) instead of "
                                "starting a tentative one; 0: every capture is a new track, as in the paper",
-                               unit="frames",
-                               source="not in the paper", low=0, high=100)
+                               unit="frames", source="not in the paper", low=0, high=100)
     drop_below: float = param(0.5, doc="a tracker drops the frame when its class's peak cell holds PHD mass "
                               "Ψ/(λ + Ψ) below this; a detector class below it is no capture", symbol="n̂",
                               source="not in the paper", low=0, high=1, low_closed=False, high_closed=False)

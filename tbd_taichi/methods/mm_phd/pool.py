@@ -6,8 +6,8 @@ import numpy as np
 
 from ... import backend
 from ...engines import kernel_module
-from ...launch import Launcher
 from ...errors import ParameterError
+from ...launch import Launcher
 from ...kernels.phd import (CX, CY, F_SUPPORT, FRAME, GROUP_FLOAT, GROUP_INT, L_SUPPORT, LENGTH, NO_CENTRE,
                              OUT_ID, OUT_LEN, N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
 from ...motion_models import DIM, model_set
@@ -30,12 +30,13 @@ def model_cdf(switch: np.ndarray, birth: np.ndarray) -> np.ndarray:
 def check_support(ms: dict) -> None:
     """The propagation kernel multiplies only ``kernels.phd``'s F_SUPPORT entries of F and F⁻¹ and L_SUPPORT's of
     L: a model set with another non-zero entry is an error (a new motion model must widen the supports)."""
-    for name, support in (("F", F_SUPPORT), ("F_inv", F_SUPPORT), ("L", L_SUPPORT)):
+    for name, support, label in (("F", F_SUPPORT, "F_SUPPORT"), ("F_inv", F_SUPPORT, "F_SUPPORT"),
+                                 ("L", L_SUPPORT, "L_SUPPORT")):
         outside = np.ones(ms[name].shape[1:], bool)
         outside[tuple(np.array(support).T)] = False
         if np.any(ms[name][:, outside] != 0):
-            raise ParameterError(f"motion models: {name} has non-zero entries outside kernels.phd's "
-                                 f"{'L' if name == 'L' else 'F'}_SUPPORT; widen the support for the new model")
+            raise ParameterError(f"motion models: {name} has non-zero entries outside kernels.phd's {label}; "
+                                 "widen the support for the new model")
 
 
 def padded(matrices: np.ndarray) -> np.ndarray:

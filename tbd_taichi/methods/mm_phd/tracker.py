@@ -68,6 +68,10 @@ class Target:
     last_position: np.ndarray = field(default_factory=lambda: np.zeros(2))
     last_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
+    def tracked(self, k: int) -> None:
+        """Frame k is tracked: keep it, the position and the velocity as the last tracked ones."""
+        self.last_frame, self.last_position, self.last_velocity = k, self.position.copy(), self.velocity.copy()
+
     def follow(self, mean: np.ndarray, cov: np.ndarray, mass: float, T: float) -> None:
         """The class estimate of this frame: position, velocity (px/s) and its largest standard deviation; an
         empty class (mass 0) keeps the predicted position and the velocity."""
@@ -138,7 +142,7 @@ class MMPHDTracker(OneSequence):
         self.online_rows: list[tuple] = []
         self.n_hat_history: list[float] = []
         self.confirmations: dict[int, int] = {}
-        self.halted: list[Target] = []  # confirmed tracks halted in the last revive_frames frames
+        self.halted: list[Target] = []  # lost confirmed tracks that a capture may still continue (_revived)
         self.clock = StageClock(STAGES)
         self._backward = None
 
@@ -215,7 +219,7 @@ class MMPHDTracker(OneSequence):
             t.mass = e.peak
             if e.peak >= p.drop_below:
                 t.drops = 0
-                t.last_frame, t.last_position, t.last_velocity = k, t.position.copy(), t.velocity.copy()
+                t.tracked(k)
                 # a tentative track counts strong frames: a strong peak cell holding most of its PHD mass
                 t.streak += t.confirmed or (e.peak >= p.confirm_above and e.mass >= p.confirm_share * total)
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
@@ -277,7 +281,7 @@ class MMPHDTracker(OneSequence):
                 self.done_rows.extend(t.rows)
                 if t.drops >= p.halt_drops:  # lost, not halted as another track's duplicate
                     self.halted.append(t)
-        self.halted = [t for t in self.halted if k - t.last_frame <= p.revive_frames]
+        self.halted = [t for t in self.halted if self._revivable(t, k)]
         self.targets = [t for t in self.targets if not t.halted]
         for t in self.targets:
             t.count = L
@@ -291,7 +295,7 @@ class MMPHDTracker(OneSequence):
             t = Target(self.next_id if old is None else old.track_id, c, k, L)
             t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
             t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
-            t.last_frame, t.last_position, t.last_velocity = k, t.position.copy(), t.velocity.copy()
+            t.tracked(k)
             t.rows.append(self._row(k, t.track_id, c.mean, c.probs, min(c.mass, 1.0)))
             state, model = tracker_start(c, L, p.vmax, p.fresh_velocity, rng)
             self.pool.load(offset, state, model, 1.0 / L, len(self.targets) + 1)
@@ -310,7 +314,7 @@ class MMPHDTracker(OneSequence):
         deviations × the time since), taken off the halted list; None if there is none or revive_frames is 0."""
         T, best, dist = self.p.frame_interval, None, np.inf
         for t in self.halted:
-            if not 0 < k - t.last_frame <= self.p.revive_frames:
+            if not self._revivable(t, k):
                 continue
             dt = (k - t.last_frame) * T
             d = float(np.hypot(*(c.mean[[X, Y]] - (t.last_position + t.last_velocity * dt))))
@@ -319,6 +323,10 @@ class MMPHDTracker(OneSequence):
         if best is not None:
             self.halted.remove(best)
         return best
+
+    def _revivable(self, t: Target, k: int) -> bool:
+        """Whether a capture at frame k may continue lost track t: last tracked 1 … revive_frames frames before."""
+        return 0 < k - t.last_frame <= self.p.revive_frames
 
     def _captures(self, k: int, n_hat: float, det_len: int) -> list[Capture]:
         """k-means on the detector's PHD (:func:`captures`); the classes whose peak cell holds PHD mass ≥
