@@ -185,7 +185,7 @@ def simulate_bruno2008(seed: int = 0, ptcr_db: float = 6.5, exit_reentry: bool =
     shape = frame_shape("shape", shape)
     peak = ptcr_peak(float(ptcr_db))
     if templates is None:
-        templates = vehicle_templates(peak)
+        templates = check_templates(vehicle_templates(peak))
     else:
         templates = check_templates(templates)
         templates = templates * (peak / np.abs(templates).max())

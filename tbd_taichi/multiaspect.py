@@ -61,7 +61,8 @@ def check_transition(g, k: int, name: str = "G") -> np.ndarray:
 
 
 def check_templates(t, name: str = "templates") -> np.ndarray:
-    """``t`` as a (K, h, w) float64 stack: K ≥ 1, h, w odd and ≤ MAX_TEMPLATE_SIDE, finite, no template all zero."""
+    """``t`` as a (K, h, w) float64 stack: K ≥ 1, h, w odd and ≤ MAX_TEMPLATE_SIDE, finite, no template all zero;
+    returned cropped to its support (:func:`crop_to_support`)."""
     t = np.asarray(t)
     if t.ndim != 3:
         raise ParameterError(f"{name} must be a 3-D stack (K, h, w), got {t.ndim}-D shape {t.shape}")
@@ -80,7 +81,19 @@ def check_templates(t, name: str = "templates") -> np.ndarray:
     empty = [i for i in range(k) if not np.any(t[i])]
     if empty:
         raise ParameterError(f"{name}: template {empty[0]} is all zero (a target must add something)")
-    return t
+    return crop_to_support(t)
+
+
+def crop_to_support(t: np.ndarray) -> np.ndarray:
+    """The (K, h, w) stack cut to the smallest centred box that holds every aspect's non-zero pixels.  §2 defines
+    r_i, r_s (l_i, l_s) as the largest distances of a *target pixel* from the centroid, so the extended grid (the
+    centroids with a target pixel in the image) must not count a template's zero margin; a centred box takes
+    max(r_i, r_s) each side, the paper's grid when the support is symmetric."""
+    rows, cols = np.nonzero(np.any(t != 0, axis=0))
+    (_, h, w) = t.shape
+    hh = int(np.abs(rows - (h - 1) // 2).max())
+    hw = int(np.abs(cols - (w - 1) // 2).max())
+    return t[:, (h - 1) // 2 - hh:(h + 1) // 2 + hh, (w - 1) // 2 - hw:(w + 1) // 2 + hw]
 
 
 def load_array(name: str, path) -> np.ndarray:

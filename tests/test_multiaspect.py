@@ -9,7 +9,7 @@ import pytest
 import tbd_taichi as tbd
 from tbd_taichi import cli, tables
 from tbd_taichi.bruno2008 import ptcr_peak, simulate_bruno2008, vehicle_templates
-from tbd_taichi.suite_bruno2008 import diverged, exit_measures, frame_errors, run_once
+from tbd_taichi.suite_bruno2008 import diverged, exit_measures, exit_outcome, frame_errors, run_once
 
 METHODS = ("ma-rs", "ma-apf")
 
@@ -125,6 +125,19 @@ def test_divergence_and_exit_measures_by_hand():
     assert exit_measures(e, 3, 7) == {"false_alarms": 1, "exit_lag": 0, "late_false_alarms": 1, "reacquire": 1}
     e["declared"][3:6] = [True, False, True]  # present at the exit frame (a lag of 1), a false alarm after it
     assert exit_measures(e, 3, 7) == {"false_alarms": 2, "exit_lag": 1, "late_false_alarms": 1, "reacquire": 1}
+    run = {"exit_frame": 3, "present": [True] * 3 + [False] * 4 + [True] * 2, **e, **exit_measures(e, 3, 7)}
+    assert exit_outcome(run) == "late"
+    run["declared"][5] = False
+    run.update(exit_measures(run, 3, 7))
+    assert exit_outcome(run) == "lag"
+    run["declared"][3] = False
+    run.update(exit_measures(run, 3, 7))
+    assert exit_outcome(run) == "clean"
+    run["dx"][7:] = [5.0, 5.0]
+    run.update(exit_measures(run, 3, 7))
+    assert exit_outcome(run) == "missed"
+    run["dx"][:3] = [4.0, 4.0, 4.0]  # lost before the exit
+    assert exit_outcome(run) == "diverged"
 
 
 def test_registry_lists_both_with_their_parameters():
@@ -139,6 +152,22 @@ def test_registry_lists_both_with_their_parameters():
         for key in ("n_particles", "p_a", "q", "T", "zeta", "G", "templates", "prior", "mh_moves", "mean_window"):
             assert f"\n{key} " in text or text.count(key) > 0
     assert vehicle_templates().shape == (4, 11, 11)
+
+
+def test_templates_are_cut_to_their_support():
+    """§2's r_i, l_i count target pixels, not a zero margin: a stack is cut to the smallest centred box holding
+    every aspect's non-zero pixels (asymmetric support: the larger side each way), values unchanged."""
+    from tbd_taichi.multiaspect import check_templates, half_sizes
+
+    t = np.zeros((2, 11, 13))
+    t[0, 5, 6] = 1.0           # the centroid
+    t[1, 3, 9] = -0.5          # 2 rows up, 3 columns right
+    cut = check_templates(t)
+    assert cut.shape == (2, 5, 7) and half_sizes(cut) == (2, 3)
+    assert cut[0, 2, 3] == 1.0 and cut[1, 0, 6] == -0.5 and np.abs(cut).sum() == np.abs(t).sum()
+    vehicle = check_templates(vehicle_templates())
+    assert vehicle.shape == (4, 9, 9) and np.abs(vehicle).sum() == np.abs(vehicle_templates()).sum()
+    assert check_templates(np.ones((1, 3, 5))).shape == (1, 3, 5)
 
 
 def _bad_files(d):
@@ -199,13 +228,15 @@ def test_bad_parameters_are_refused_by_name(tmp_path, method, settings, offender
 def test_the_cli_refuses_a_bad_param_and_small_frames(tmp_path, capsys):
     d = _bad_files(tmp_path)
     np.save(d / "frames.npy", np.zeros((4, 9, 9), np.float32))
+    np.save(d / "wide.npy", np.ones((1, 11, 11)))
     np.save(d / "ok.npy", np.zeros((4, 32, 32), np.float32))
     cases = [(["--param", "np=5"], "unknown"), (["--param", "p_a=x"], "p_a"),
              (["--param", f"templates={d / 'even.npy'}"], "odd")]
     for extra, offender in cases:
         assert cli.main(["track", str(d / "ok.npy"), "--method", "ma-rs", "--out", str(d / "o.csv")] + extra) == 2
         assert offender in capsys.readouterr().err
-    assert cli.main(["track", str(d / "frames.npy"), "--method", "ma-apf", "--out", str(d / "o.csv")]) == 2
+    assert cli.main(["track", str(d / "frames.npy"), "--method", "ma-apf", "--out", str(d / "o.csv"),
+                     "--param", f"templates={d / 'wide.npy'}"]) == 2
     assert "larger than the 9x9 frame" in capsys.readouterr().err
 
 

@@ -9,7 +9,7 @@ from .params import MultiaspectParams, multiaspect_params, particles
 from .tracker import EXTRA_COLUMNS, MultiaspectTracker
 
 ASSUMES = ("one extended target at a time whose shapes are the templates (default: the bruno2008 scenario's "
-           "11x11 vehicle), added to a smooth background (removed by a local mean) in first-order GMRF clutter "
+           "9x9 vehicle), added to a smooth background (removed by a local mean) in first-order GMRF clutter "
            "estimated every frame; the default image prior lets it be anywhere, moving ≤ 3 px/frame")
 
 

@@ -16,6 +16,7 @@ from ..registry import param, validate_params
 
 PAPER_PARTICLES = {"rs": 8000, "apf": 5000}  # §4: N_p of the resample-move and auxiliary filters
 PRIORS = ("image", "paper")
+MIN_MEAN_WINDOW = 15  # px: the auto window for a small support (a 3×3 mean would hold a point target)
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ class MultiaspectParams:
     mh_moves: int = param(1, doc="Metropolis–Hastings moves per frame (ma-rs)", source="§3.2, Eqs. 19–21", low=1,
                           high=100)
     mean_window: int | None = param(None, doc="side of the local-mean window removed before the GMRF (auto: 3 "
-                                    "template sides, made odd)", unit="px", source="§2 (\"suitable preprocessing\")",
+                                    "sides of the templates' support, made odd, at least 15)", unit="px", source="§2 (\"suitable preprocessing\")",
                                     low=3, high=10001, optional=True)
     gmrf: str = param("estimate", doc="clutter parameters: estimate (maximum likelihood of Eq. 13 every frame) or "
                       "BH,BV,SIGMA_C fixed", symbol="β_h, β_v, σ_c", source="Eqs. 9, 13, 14")
@@ -100,7 +101,7 @@ def _templates(spec: str) -> np.ndarray:
     if spec == "vehicle":
         from ...bruno2008 import vehicle_templates
 
-        return vehicle_templates()  # peak 1: scaled by 10^(PTCR/20)·σ_c at the first frame
+        return check_templates(vehicle_templates())  # cropped, peak 1: scaled by 10^(PTCR/20)·σ_c at the first frame
     return check_templates(load_array("templates", spec))
 
 
@@ -144,7 +145,7 @@ def resolve(p: MultiaspectParams, shape: tuple[int, int]) -> Resolved:
     if p.births == "data" and p.prior == "paper":
         raise ParameterError("births=data needs prior=image (its f₀ is uniform over cells, which the proposal's "
                              "weight f₀/q assumes); §4's prior draws births from its own law (births=prior)")
-    window = p.mean_window or 3 * max(th, tw) // 2 * 2 + 1
+    window = p.mean_window or max(3 * max(th, tw) // 2 * 2 + 1, MIN_MEAN_WINDOW)
     if window % 2 == 0:
         raise ParameterError(f"mean_window = {window} must be odd (a centred window)")
     return Resolved(t, p.templates == "vehicle", g, noise_factor(motion_noise(p.q, p.T, p.zeta, p.motion)), prior,
