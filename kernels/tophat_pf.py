@@ -29,6 +29,15 @@ SUMMARY = ("x", "y", "s", "snr", "bx", "by", "neff", "loglik")  # per-group colu
 SUM_X, SUM_Y, SUM_S, SUM_SNR, SUM_BX, SUM_BY, SUM_NEFF, SUM_LOGLIK = range(len(SUMMARY))
 CONFIG = ("c", "sigma_v", "s_drift", "sigma_0")  # ``configure``'s values
 NEG_INF = -3.0e38
+EXPF_ZERO = -103.972076416015625  # -0x1.9fe368p6: libm's expf(x) is 0 below it (and slow: the underflow path)
+BY_GROUP_MIN = 4  # live groups from which a CPU step runs each group's whole step in one thread
+
+
+def by_group(live: int) -> bool:
+    """Whether a step of ``live`` groups runs each group in one thread (:meth:`TophatPFKernels.step_by_group`): on
+    a CPU from BY_GROUP_MIN groups.  On a GPU (thread_span 1) one thread per group would serialise each group's
+    particles, so a GPU always steps by particle."""
+    return live >= BY_GROUP_MIN and thread_span(False) > 1
 
 
 @ti.data_oriented
@@ -48,6 +57,9 @@ class TophatPFKernels:
         self.xp, self.yp = ti.field(ti.f32, slots), ti.field(ti.f32, slots)  # propagated particles
         self.logw = ti.field(ti.f32, slots)
         self.cum = ti.field(ti.f64, slots)
+        self.below = ti.field(ti.i32, slots)  # resampling: the points below each particle's c_i
+        self.first_copy = ti.field(ti.i32, self.groups * (self.n + 1))  # resample_group's marks, −1 between steps
+        self.first_copy.fill(-1)
         self.alive = ti.field(ti.i32, self.groups)
         self.live = ti.field(ti.i32, self.groups)  # the live groups, in order; n_live of them
         self.n_live = ti.field(ti.i32, ())
@@ -59,6 +71,7 @@ class TophatPFKernels:
         self.config = ti.field(ti.f32, len(CONFIG))
         self.seed = ti.field(ti.u32, ())
         self.tables = NormalTables.shared()
+        self.live_count = 0  # live groups, as the host last set them
 
     @ti.kernel
     def configure(self, seed: ti.u32, values: ti.types.ndarray(dtype=ti.f32, ndim=1)):
@@ -99,8 +112,18 @@ class TophatPFKernels:
 
     # ------------------------------------------------------------------ the particles
 
+    def start(self, init, count: int) -> None:
+        """:meth:`start_filters`; the host keeps the live count (:meth:`step` chooses its loops by it)."""
+        self.live_count = int(count)
+        self.start_filters(init, count)
+
+    def set_alive(self, alive) -> None:
+        """:meth:`update_alive`; the host keeps the live count."""
+        self.live_count = int((alive == 1).sum())
+        self.update_alive(alive)
+
     @ti.kernel
-    def start(self, init: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
+    def start_filters(self, init: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
         """Groups g < ``count`` alive with init[g] = (x, y, z): z the reference, N particles at (x, y) + σ₀·n
         (streams S_START_X, S_START_Y, frame 0); the ring, the drift and the summary start at (x, y)."""
         n, groups = ti.static(self.n, self.groups)
@@ -128,7 +151,7 @@ class TophatPFKernels:
             self.y[p] = init[g, 1] + sigma_0 * ny
 
     @ti.kernel
-    def set_alive(self, alive: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    def update_alive(self, alive: ti.types.ndarray(dtype=ti.i32, ndim=1)):
         """alive ← ``alive`` (Alg. 5's survivors)."""
         for g in range(self.groups):
             self.alive[g] = alive[g]
@@ -147,120 +170,187 @@ class TophatPFKernels:
                     m += 1
             self.n_live[None] = m
 
-    @ti.kernel
-    def step(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
+    def step(self, frame: int, since: int, drift: int, motion: int) -> None:
         """One SIR step of every live group on the current S_k (see the module's docstring); ``since``: frames
-        since the filters started (the drift averages over min(S, since) displacements)."""
-        self.propagate_and_weigh(frame, motion)
-        self.normalise(frame)
-        self.estimate(since, drift)
+        since the filters started (the drift averages over min(S, since) displacements).  One launch, chosen by
+        :func:`by_group`: each group's whole step in one thread (its particles stay in the core's cache from the
+        propagation to the estimate), or the propagation spread over the particles.  Both give the same numbers.
+        A tracker calls the two kernels itself (through the launcher's fast path)."""
+        step = self.step_by_group if by_group(self.live_count) else self.step_by_particle
+        step(frame, since, drift, motion)
 
-    @ti.func
-    def propagate_and_weigh(self, frame: ti.i32, motion: ti.i32):
-        """x_k = x_{k−1} + B + C·n (Eq. 3.2) and the log-weights of Eqs. 3.14 and 3.16."""
-        n, h, w = ti.static(self.n, self.shape[0], self.shape[1])
-        tw, tk, tphi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
-        kx, ky = key_prefix(self.seed[None], frame, S_X), key_prefix(self.seed[None], frame, S_Y)
-        c, sigma_v = self.config[0], self.config[1]
-        sigma = ti.cast(self.stats[0], ti.f32)
-        inv_var = 1.0 / ti.max(sigma * sigma, 1e-30)
-        inv_2sv2 = 1.0 / (2.0 * sigma_v * sigma_v)
+    @ti.kernel
+    def step_by_particle(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
+        """:meth:`step` in three loops: propagate and weigh every particle, then per group normalise, then per group
+        resample and estimate."""
+        n = ti.static(self.n)
+        k = self.weigh_constants(frame)
         for q in range(self.n_live[None] * n):
             g = self.live[q // n]
-            p = g * n + q % n
-            bx, by = self.drift[g, 0], self.drift[g, 1]
-            nx, ny = normals_at(tw, tk, tphi, [kx, ky], p)
-            x = self.x[p] + bx + c * nx
-            y = self.y[p] + by + c * ny
-            self.xp[p] = x
-            self.yp[p] = y
-            col = ti.cast(ti.floor(x + 0.5), ti.i32)
-            row = ti.cast(ti.floor(y + 0.5), ti.i32)
-            lw = ti.f32(NEG_INF)
-            if 0 <= col < w and 0 <= row < h:
-                z = self.ref[g]
-                lw = (z * self.s[row, col] - 0.5 * z * z) * inv_var  # Eq. 3.14 over the noise density
-                if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
-                    dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
-                    dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
-                    lw -= (dx * dx + dy * dy) * inv_2sv2
-            self.logw[p] = lw
-
-    @ti.func
-    def normalise(self, frame: ti.i32):
-        """Per group (serially): the maximum, c_i = Σ_{l≤i} exp(lw_l − max) (f32 terms, the sums f64), the total,
-        N̂_eff = (Σw)²/Σw² (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
-        n = ti.static(self.n)
+            self.logw[g * n + q % n] = self.propagate_and_weigh(g, g * n + q % n, k, motion)
         span = ti.static(thread_span(False))
-        key = key_prefix(self.seed[None], frame, S_RESAMPLE)
         for t in range(self.n_live[None] * span):
-            g = self.live[t // span]
             if t % span == 0:
+                g = self.live[t // span]
                 m = ti.f32(NEG_INF)
                 for i in range(g * n, (g + 1) * n):
                     m = ti.max(m, self.logw[i])
-                s, s2 = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
-                for i in range(g * n, (g + 1) * n):
-                    wi = ti.cast(0.0, ti.f64)
-                    if m > NEG_INF:
-                        wi = ti.cast(ti.exp(self.logw[i] - m), ti.f64)
-                    else:  # every particle off the image: keep them all alike
-                        wi = 1.0
-                    s += wi
-                    s2 += wi * wi
-                    self.cum[i] = s
-                self.gmax[g] = m
-                self.gtotal[g] = s
-                self.u1[g] = uniform_f64_at(key, g)
-                self.summary[g, SUM_NEFF] = ti.cast(s * s / s2, ti.f32)
-                self.summary[g, SUM_LOGLIK] = ti.cast(ti.log(s / n), ti.f32) + ti.max(m, ti.f32(-1e30))
+                self.normalise(g, m, frame)
+        for t in range(self.n_live[None] * span):
+            if t % span == 0:
+                self.estimate(self.live[t // span], since, drift)
+
+    @ti.kernel
+    def step_by_group(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
+        """:meth:`step` in one loop over the live groups, each group's propagation, normalisation and estimate in
+        one thread."""
+        n = ti.static(self.n)
+        span = ti.static(thread_span(False))
+        k = self.weigh_constants(frame)
+        for t in range(self.n_live[None] * span):
+            if t % span == 0:
+                g = self.live[t // span]
+                m = ti.f32(NEG_INF)
+                for p in range(g * n, (g + 1) * n):
+                    lw = self.propagate_and_weigh(g, p, k, motion)
+                    self.logw[p] = lw
+                    m = ti.max(m, lw)
+                self.normalise(g, m, frame)
+                self.estimate(g, since, drift)
+
+    @ti.func
+    def weigh_constants(self, frame: ti.i32):
+        """(x key, y key, C, 1/σ_k², 1/(2σ_v²)) of this frame's propagation, the keys as f32 bit patterns."""
+        c, sigma_v = self.config[0], self.config[1]
+        sigma = ti.cast(self.stats[0], ti.f32)
+        kx, ky = key_prefix(self.seed[None], frame, S_X), key_prefix(self.seed[None], frame, S_Y)
+        return ti.Vector([ti.bit_cast(kx, ti.f32), ti.bit_cast(ky, ti.f32), c,
+                          1.0 / ti.max(sigma * sigma, 1e-30), 1.0 / (2.0 * sigma_v * sigma_v)], dt=ti.f32)
+
+    @ti.func
+    def propagate_and_weigh(self, g: ti.i32, p: ti.i32, k, motion: ti.i32) -> ti.f32:
+        """Particle p of group g: x_k = x_{k−1} + B + C·n (Eq. 3.2) into (xp, yp); returns its log-weight
+        (Eqs. 3.14 and 3.16); ``k``: :meth:`weigh_constants`."""
+        h, w = ti.static(self.shape)
+        tw, tk, tphi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
+        bx, by = self.drift[g, 0], self.drift[g, 1]
+        nx, ny = normals_at(tw, tk, tphi, [ti.bit_cast(k[0], ti.u32), ti.bit_cast(k[1], ti.u32)], p)
+        x = self.x[p] + bx + k[2] * nx
+        y = self.y[p] + by + k[2] * ny
+        self.xp[p] = x
+        self.yp[p] = y
+        col = ti.cast(ti.floor(x + 0.5), ti.i32)
+        row = ti.cast(ti.floor(y + 0.5), ti.i32)
+        lw = ti.f32(NEG_INF)
+        if 0 <= col < w and 0 <= row < h:
+            z = self.ref[g]
+            lw = (z * self.s[row, col] - 0.5 * z * z) * k[3]  # Eq. 3.14 over the noise density
+            if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
+                dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
+                dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
+                lw -= (dx * dx + dy * dy) * k[4]
+        return lw
+
+    @ti.func
+    def normalise(self, g: ti.i32, m: ti.f32, frame: ti.i32):
+        """Group g with log-weight maximum m: c_i = Σ_{l≤i} exp(lw_l − m) (f32 terms, the sums f64), the total,
+        N̂_eff = (Σw)²/Σw² (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
+        n = ti.static(self.n)
+        # the terms first, in a loop of their own: a call to exp inside the running sums' loop stalls them
+        if m > NEG_INF:
+            for i in range(g * n, (g + 1) * n):
+                t = self.logw[i] - m
+                # expf returns 0 below EXPF_ZERO, through a slow path (errno); skip it
+                wi = ti.cast(0.0, ti.f64)
+                if t >= EXPF_ZERO:
+                    wi = ti.cast(ti.exp(t), ti.f64)
+                self.cum[i] = wi
+        else:  # every particle off the image: keep them all alike
+            for i in range(g * n, (g + 1) * n):
+                self.cum[i] = 1.0
+        s, s2 = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
+        for i in range(g * n, (g + 1) * n):
+            wi = self.cum[i]
+            s += wi
+            s2 += wi * wi
+            self.cum[i] = s
+        self.gmax[g] = m
+        self.gtotal[g] = s
+        self.u1[g] = uniform_f64_at(key_prefix(self.seed[None], frame, S_RESAMPLE), g)
+        self.summary[g, SUM_NEFF] = ti.cast(s * s / s2, ti.f32)
+        self.summary[g, SUM_LOGLIK] = ti.cast(ti.log(s / n), ti.f32) + ti.max(m, ti.f32(-1e30))
 
     @ti.func
     def resample_group(self, g: ti.i32) -> ti.types.vector(2, ti.f64):
-        """Alg. 2 for group g: output j copies the first particle whose c_i exceeds (u₁ + j)·(Σw/N), found by one
-        forward walk (the points rise with j); returns the sums of the copies' x and y."""
+        """Alg. 2 for group g: output j copies the first particle whose c_i exceeds the point (u₁ + j)·(Σw/N);
+        returns the sums of the copies' x and y.  Without a branch per output (a forward walk's exit test is
+        mispredicted about once an output, which cost more than the propagation): particle i fills outputs
+        [b_{i−1}, b_i), b_i = :meth:`points_below` c_i (b = N for the last), so each particle marks the first
+        output it fills (first_copy, −1 elsewhere) and a running maximum over the outputs gives each its particle."""
         n = ti.static(self.n)
-        i, last = g * n, (g + 1) * n - 1
+        a, last = g * n, (g + 1) * n - 1
+        marks, unused = g * (n + 1), g * (n + 1) + n  # group g's marks and a slot for particles with no copy
+        spacing, u1 = self.gtotal[g] / n, self.u1[g]
+        inv = 1.0 / spacing
+        for i in range(a, last):  # a loop of its own: without the marks' stores it runs about twice as fast
+            self.below[i] = self.points_below(self.cum[i], u1, spacing, inv)
+        self.below[last] = n
+        prev = 0
+        for i in range(a, last + 1):
+            c = self.below[i]
+            self.first_copy[ti.select(c > prev, marks + prev, unused)] = i
+            prev = c
         sx, sy = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
-        spacing = self.gtotal[g] / n
+        src = a
         for j in range(n):
-            v = (self.u1[g] + ti.cast(j, ti.f64)) * spacing
-            while i < last and self.cum[i] <= v:
-                i += 1
-            x, y = self.xp[i], self.yp[i]
-            self.x[g * n + j] = x
-            self.y[g * n + j] = y
+            src = ti.max(src, self.first_copy[marks + j])
+            self.first_copy[marks + j] = -1  # ready for the next frame
+            x, y = self.xp[src], self.yp[src]
+            self.x[a + j] = x
+            self.y[a + j] = y
             sx += x
             sy += y
         return ti.Vector([sx, sy])
 
     @ti.func
-    def estimate(self, since: ti.i32, drift: ti.i32):
-        """Per group (serially): systematic resampling (``resample_group``), x̂ = mean of the resampled particles, S_k and S_k/σ_k at its pixel, and the drift
-        B = (x̂_k − x̂_{k−m})/m, m = min(S, since) (Alg. 6), while ``drift``."""
+    def points_below(self, c: ti.f64, u1: ti.f64, spacing: ti.f64, inv: ti.f64) -> ti.i32:
+        """#{j < N : (u₁ + j)·spacing < c}, the points exactly as the walk computes them: ⌈c/spacing − u₁⌉ (the
+        value is > −1: ⌊·⌋ + 1 unless it is a whole number), clipped to N; within 10⁻⁹ of a whole number, where
+        rounding decides, the count is corrected by one either way against the points themselves (rare: the
+        branch is predicted)."""
+        n = ti.static(self.n)
+        x = c * inv - u1
+        k = ti.min(ti.cast(x + 1.0, ti.i32), n)  # x + 1 > 0: the cast is ⌊x⌋ + 1
+        if ti.abs(x - ti.round(x)) < 1e-9 * (1.0 + ti.abs(x)):
+            if k > 0 and (u1 + ti.cast(k - 1, ti.f64)) * spacing >= c:
+                k -= 1
+            if k < n and (u1 + ti.cast(k, ti.f64)) * spacing < c:
+                k += 1
+        return k
+
+    @ti.func
+    def estimate(self, g: ti.i32, since: ti.i32, drift: ti.i32):
+        """Group g: systematic resampling (``resample_group``), x̂ = mean of the resampled particles, S_k and
+        S_k/σ_k at its pixel, and the drift B = (x̂_k − x̂_{k−m})/m, m = min(S, since) (Alg. 6), while ``drift``."""
         n, h, w, ring = ti.static(self.n, self.shape[0], self.shape[1], self.ring)
-        span = ti.static(thread_span(False))
         sigma = ti.cast(self.stats[0], ti.f32)
         s_drift = ti.cast(self.config[2], ti.i32)
-        for t in range(self.n_live[None] * span):
-            g = self.live[t // span]
-            if t % span == 0:
-                sums = self.resample_group(g)
-                ex, ey = ti.cast(sums[0] / n, ti.f32), ti.cast(sums[1] / n, ti.f32)
-                col = ti.min(ti.max(ti.cast(ti.floor(ex + 0.5), ti.i32), 0), w - 1)
-                row = ti.min(ti.max(ti.cast(ti.floor(ey + 0.5), ti.i32), 0), h - 1)
-                self.summary[g, SUM_X] = ex
-                self.summary[g, SUM_Y] = ey
-                self.summary[g, SUM_S] = self.s[row, col]
-                self.summary[g, SUM_SNR] = self.s[row, col] / ti.max(sigma, 1e-30)
-                slot = since % ring
-                self.ring_xy[g, slot, 0] = ex
-                self.ring_xy[g, slot, 1] = ey
-                if drift != 0:
-                    m = ti.min(s_drift, since)
-                    if m > 0:
-                        old = (since - m) % ring
-                        self.drift[g, 0] = (ex - self.ring_xy[g, old, 0]) / m
-                        self.drift[g, 1] = (ey - self.ring_xy[g, old, 1]) / m
-                self.summary[g, SUM_BX] = self.drift[g, 0]
-                self.summary[g, SUM_BY] = self.drift[g, 1]
+        sums = self.resample_group(g)
+        ex, ey = ti.cast(sums[0] / n, ti.f32), ti.cast(sums[1] / n, ti.f32)
+        col = ti.min(ti.max(ti.cast(ti.floor(ex + 0.5), ti.i32), 0), w - 1)
+        row = ti.min(ti.max(ti.cast(ti.floor(ey + 0.5), ti.i32), 0), h - 1)
+        self.summary[g, SUM_X] = ex
+        self.summary[g, SUM_Y] = ey
+        self.summary[g, SUM_S] = self.s[row, col]
+        self.summary[g, SUM_SNR] = self.s[row, col] / ti.max(sigma, 1e-30)
+        slot = since % ring
+        self.ring_xy[g, slot, 0] = ex
+        self.ring_xy[g, slot, 1] = ey
+        if drift != 0:
+            m = ti.min(s_drift, since)
+            if m > 0:
+                old = (since - m) % ring
+                self.drift[g, 0] = (ex - self.ring_xy[g, old, 0]) / m
+                self.drift[g, 1] = (ey - self.ring_xy[g, old, 1]) / m
+        self.summary[g, SUM_BX] = self.drift[g, 0]
+        self.summary[g, SUM_BY] = self.drift[g, 1]

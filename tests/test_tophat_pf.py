@@ -63,6 +63,49 @@ def assert_twins(a, b, scale: float, where: str) -> None:
             np.testing.assert_allclose(u, v, rtol=1e-5, atol=1e-5 * scale, err_msg=f"{name} {where}")
 
 
+def test_branch_free_resampling_picks_what_the_walk_picks():
+    """Alg. 2 by marks and a running maximum (kernels.tophat_pf.resample_group) against the definition (output j
+    copies the first particle whose c_i exceeds (u₁ + j)·Σw/N, the last if none): weights with runs of zeros,
+    ties, one particle holding all, and c_i placed exactly on points, where ⌈c/spacing − u₁⌉ is decided by
+    rounding."""
+    import taichi as ti
+
+    n, groups = 61, 6
+    k = kernel_module("taichi", "tophat_pf").TophatPFKernels(groups, n, (5, 5), 2)
+    rng = np.random.default_rng(3)
+    w = rng.exponential(1.0, (groups, n))
+    w[0, rng.random(n) < 0.6] = 0.0  # runs of zeros, the first particle among them
+    w[0, 0] = 0.0
+    w[1] = 1.0  # ties: every particle once
+    w[2] = 0.0
+    w[2, 17] = 5.0  # one particle holds all
+    u1 = rng.random(groups)
+    u1[3] = 0.5
+    cum = np.cumsum(w, axis=1)
+    spacing = cum[:, -1] / n
+    for g in (3, 4, 5):  # some c_i exactly on a point, as the walk computes the points
+        for i in rng.choice(n - 1, 12, replace=False):
+            cum[g, i] = (u1[g] + float(rng.integers(0, n))) * spacing[g]
+        cum[g, :-1] = np.minimum(np.sort(cum[g, :-1]), cum[g, -1])
+    points = (u1[:, None] + np.arange(n)) * spacing[:, None]
+    expected = np.stack([np.minimum(np.searchsorted(cum[g], points[g], side="right"), n - 1) for g in range(groups)])
+    k.cum.from_numpy(cum.ravel())
+    k.gtotal.from_numpy(cum[:, -1].copy())
+    k.u1.from_numpy(u1)
+    k.xp.from_numpy(np.tile(np.arange(n, dtype=F32), groups))
+    k.yp.from_numpy(np.zeros(groups * n, F32))
+
+    @ti.kernel
+    def resample_all():
+        for g in range(groups):
+            k.resample_group(g)
+
+    for _ in range(2):  # the marks are reset for the next frame
+        resample_all()
+        np.testing.assert_array_equal(read(k, "x").reshape(groups, n), expected.astype(F32))
+    assert set(expected[2]) == {17} and np.array_equal(expected[1], np.arange(n))
+
+
 @pytest.mark.parametrize("schedule", list(SCHEDULES))
 @pytest.mark.parametrize("shape", [(23, 37), (7, 7)])
 def test_kernels_match_the_numpy_twin(shape, schedule):

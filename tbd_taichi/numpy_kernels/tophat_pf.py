@@ -74,6 +74,8 @@ class TophatPFKernels:
         self._resample(live, p, cum, total, u1)
         self._estimate(live, p, since, drift)
 
+    step_by_group = step_by_particle = step  # the kernel's two loop layouts: the same numbers
+
     def _propagate_and_weigh(self, frame: int, live, p, motion: int) -> None:
         h, w = self.shape
         c, sigma_v = self.config[0], self.config[1]
