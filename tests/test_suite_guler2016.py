@@ -24,7 +24,9 @@ def test_plan_runs_per_method_and_the_sweeps():
     assert {r["seed"] for r in main} == set(range(5, 25))
     assert all(r["settings"] == {} for r in main)  # the defaults for every Δ (issue 40)
     sweeps = [r for r in todo if r["table"] != "main"]
-    assert len(sweeps) == (15 + 11 + 7) * sg.SWEEP_RUNS and {r["method"] for r in sweeps} == {"tophat-pf"}
+    assert len(sweeps) == (15 + 2 * 11 + 2 * 7) * sg.SWEEP_RUNS and {r["method"] for r in sweeps} == {"tophat-pf"}
+    hard = {(r["table"], r["wall"], r["motion"], r["delta"]) for r in sweeps if r["delta"] == 15}
+    assert hard == {("S", "S1", 2, 15), ("C", "S1", 1, 15)}  # S and C again where the filter must coast
     assert not [r for r in sg.plan(("pf",), runs=2) if r["table"] != "main"]  # sweeps only with tophat-pf
 
 
@@ -53,6 +55,17 @@ def test_report_beside_the_thesis_and_the_wins_paragraph():
     assert "| S1 | 30 | 3.26 | 0.0326 | 0.0328 |" in text
     assert "## Where SGDS-PF wins / loses" in text and "in as many in 0 and in fewer in the other 1;" in text
     assert "sgds's median MSE of its held runs is lower in 1 cells (S1 M1 Δ=30)" in text
+
+
+def test_a_sweep_gets_one_table_per_setup():
+    """Table 4.10 at S1 Motion 2 Δ 20 and again at Δ 15: each table holds its own setup's runs only."""
+    runs = [dict(fake("tophat-pf", mse, delta=d), table="S", motion=2, settings={"s_drift": s})
+            for d, s, mse in ((20, 3, 0.02), (20, 50, 0.03), (15, 3, 9.0), (15, 50, 0.1))]
+    text = "\n".join(sg.sweep_tables(runs))
+    assert text.count("### Table 4.10") == 2
+    first, second = text.split("Motion 2, Δ 15")
+    assert "Motion 2, Δ 20" in first and "| 3 | 0.1667 | 0.0200 / 0.0200 |" in first and "9.0000" not in first
+    assert "| 3 | 0.1667 | 9.0000 / 9.0000 |" in second and "| 50 | 0.0985 | 0.1000 / 0.1000 |" in second
 
 
 @pytest.mark.parametrize("argv, message", [
