@@ -20,6 +20,7 @@ Sums within a group run serially in one thread (groups in parallel), so the resu
 count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
 ``tbd_taichi.numpy_kernels.tophat_pf``."""
 import taichi as ti
+from taichi.lang import impl
 
 from .loops import thread_span
 from .rng import NormalTables, key_prefix, normals_at, uniform_f64_at
@@ -35,9 +36,11 @@ BY_GROUP_MIN = 4  # live groups from which a CPU step runs each group's whole st
 
 def by_group(live: int) -> bool:
     """Whether a step of ``live`` groups runs each group in one thread (:meth:`TophatPFKernels.step_by_group`): on
-    a CPU from BY_GROUP_MIN groups.  On a GPU (thread_span 1) one thread per group would serialise each group's
-    particles, so a GPU always steps by particle."""
-    return live >= BY_GROUP_MIN and thread_span(False) > 1
+    a CPU from max(BY_GROUP_MIN, threads) groups, so that every thread has a group.  On a GPU (thread_span 1) one
+    thread per group would serialise each group's particles, so a GPU always steps by particle."""
+    if thread_span(False) == 1:
+        return False
+    return live >= max(BY_GROUP_MIN, impl.current_cfg().cpu_max_num_threads)
 
 
 @ti.data_oriented
@@ -114,6 +117,8 @@ class TophatPFKernels:
 
     def start(self, init, count: int) -> None:
         """:meth:`start_filters`; the host keeps the live count (:meth:`step` chooses its loops by it)."""
+        if not 0 <= int(count) <= self.groups:
+            raise ValueError(f"start: count {count} outside 0..{self.groups} groups")
         self.live_count = int(count)
         self.start_filters(init, count)
 
@@ -184,10 +189,10 @@ class TophatPFKernels:
         """:meth:`step` in three loops: propagate and weigh every particle, then per group normalise, then per group
         resample and estimate."""
         n = ti.static(self.n)
-        k = self.weigh_constants(frame)
+        keys, k = self.noise_keys(frame), self.weigh_constants()
         for q in range(self.n_live[None] * n):
             g = self.live[q // n]
-            self.logw[g * n + q % n] = self.propagate_and_weigh(g, g * n + q % n, k, motion)
+            self.logw[g * n + q % n] = self.propagate_and_weigh(g, g * n + q % n, keys, k, motion)
         span = ti.static(thread_span(False))
         for t in range(self.n_live[None] * span):
             if t % span == 0:
@@ -206,37 +211,41 @@ class TophatPFKernels:
         one thread."""
         n = ti.static(self.n)
         span = ti.static(thread_span(False))
-        k = self.weigh_constants(frame)
+        keys, k = self.noise_keys(frame), self.weigh_constants()
         for t in range(self.n_live[None] * span):
             if t % span == 0:
                 g = self.live[t // span]
                 m = ti.f32(NEG_INF)
                 for p in range(g * n, (g + 1) * n):
-                    lw = self.propagate_and_weigh(g, p, k, motion)
+                    lw = self.propagate_and_weigh(g, p, keys, k, motion)
                     self.logw[p] = lw
                     m = ti.max(m, lw)
                 self.normalise(g, m, frame)
                 self.estimate(g, since, drift)
 
     @ti.func
-    def weigh_constants(self, frame: ti.i32):
-        """(x key, y key, C, 1/σ_k², 1/(2σ_v²)) of this frame's propagation, the keys as f32 bit patterns."""
+    def weigh_constants(self):
+        """(C, 1/σ_k², 1/(2σ_v²)) of this frame's propagation."""
         c, sigma_v = self.config[0], self.config[1]
         sigma = ti.cast(self.stats[0], ti.f32)
-        kx, ky = key_prefix(self.seed[None], frame, S_X), key_prefix(self.seed[None], frame, S_Y)
-        return ti.Vector([ti.bit_cast(kx, ti.f32), ti.bit_cast(ky, ti.f32), c,
-                          1.0 / ti.max(sigma * sigma, 1e-30), 1.0 / (2.0 * sigma_v * sigma_v)], dt=ti.f32)
+        return ti.Vector([c, 1.0 / ti.max(sigma * sigma, 1e-30), 1.0 / (2.0 * sigma_v * sigma_v)], dt=ti.f32)
 
     @ti.func
-    def propagate_and_weigh(self, g: ti.i32, p: ti.i32, k, motion: ti.i32) -> ti.f32:
+    def noise_keys(self, frame: ti.i32):
+        """The x and y noise streams' key prefixes of this frame (u32)."""
+        return ti.Vector([key_prefix(self.seed[None], frame, S_X), key_prefix(self.seed[None], frame, S_Y)],
+                         dt=ti.u32)
+
+    @ti.func
+    def propagate_and_weigh(self, g: ti.i32, p: ti.i32, keys, k, motion: ti.i32) -> ti.f32:
         """Particle p of group g: x_k = x_{k−1} + B + C·n (Eq. 3.2) into (xp, yp); returns its log-weight
-        (Eqs. 3.14 and 3.16); ``k``: :meth:`weigh_constants`."""
+        (Eqs. 3.14 and 3.16); ``keys``: :meth:`noise_keys`, ``k``: :meth:`weigh_constants`."""
         h, w = ti.static(self.shape)
         tw, tk, tphi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
         bx, by = self.drift[g, 0], self.drift[g, 1]
-        nx, ny = normals_at(tw, tk, tphi, [ti.bit_cast(k[0], ti.u32), ti.bit_cast(k[1], ti.u32)], p)
-        x = self.x[p] + bx + k[2] * nx
-        y = self.y[p] + by + k[2] * ny
+        nx, ny = normals_at(tw, tk, tphi, [keys[0], keys[1]], p)
+        x = self.x[p] + bx + k[0] * nx
+        y = self.y[p] + by + k[0] * ny
         self.xp[p] = x
         self.yp[p] = y
         col = ti.cast(ti.floor(x + 0.5), ti.i32)
@@ -244,11 +253,11 @@ class TophatPFKernels:
         lw = ti.f32(NEG_INF)
         if 0 <= col < w and 0 <= row < h:
             z = self.ref[g]
-            lw = (z * self.s[row, col] - 0.5 * z * z) * k[3]  # Eq. 3.14 over the noise density
+            lw = (z * self.s[row, col] - 0.5 * z * z) * k[1]  # Eq. 3.14 over the noise density
             if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
                 dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
                 dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
-                lw -= (dx * dx + dy * dy) * k[4]
+                lw -= (dx * dx + dy * dy) * k[2]
         return lw
 
     @ti.func

@@ -161,8 +161,8 @@ def test_aspect_transitions_follow_g():
 
 def test_exit_and_reentry():
     """Figs. 1–5: target 0 on frames 0..e − 1 and leaving (its next predicted centroid off the extended grid of
-    the 9×9 support, rows and columns ≤ 123), frames e..e + 5 without truth and without template pixels, target 1 from e + 6 at
-    a §4 prior position, max(51, e + 21) frames; the frames are Eq. 8 cut at the border.  §4's prior leaves
+    the 9×9 support, rows and columns ≤ 123), frames e..e + 5 without truth and without template pixels, target 1
+    from e + 6 at a §4 prior position, max(51, e + 21) frames; the frames are Eq. 8 cut at the border.  §4's prior leaves
     around frame 30 (row U[50, 70] at 2 px/frame to 123.5): e in [25, 40] for seeds 0–3."""
     for seed in range(4):
         scene = simulate_bruno2008(seed=seed, exit_reentry=True)

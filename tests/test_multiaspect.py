@@ -133,9 +133,15 @@ def test_divergence_and_exit_measures_by_hand():
     run["declared"][3] = False
     run.update(exit_measures(run, 3, 7))
     assert exit_outcome(run) == "clean"
-    run["dx"][7:] = [5.0, 5.0]
+    run["dx"][7:] = [5.0, 5.0]  # the new target not acquired: counted apart, the empty frames stay clean
     run.update(exit_measures(run, 3, 7))
-    assert exit_outcome(run) == "missed"
+    assert exit_outcome(run) == "clean" and run["reacquire"] is None
+    run["declared"][3:5] = [True, True]  # two frames from the exit on: held, not a lag
+    run.update(exit_measures(run, 3, 7))
+    assert run["exit_lag"] == 2 and exit_outcome(run) == "held"
+    run["declared"][3:7] = [True] * 4  # never 'absent' again
+    run.update(exit_measures(run, 3, 7))
+    assert run["exit_lag"] is None and exit_outcome(run) == "held"
     run["dx"][:3] = [4.0, 4.0, 4.0]  # lost before the exit
     assert exit_outcome(run) == "diverged"
 

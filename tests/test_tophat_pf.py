@@ -87,11 +87,8 @@ def test_branch_free_resampling_picks_what_the_walk_picks():
         for i in rng.choice(n - 1, 12, replace=False):
             cum[g, i] = (u1[g] + float(rng.integers(0, n))) * spacing[g]
         cum[g, :-1] = np.minimum(np.sort(cum[g, :-1]), cum[g, -1])
-    points = (u1[:, None] + np.arange(n)) * spacing[:, None]
-    expected = np.stack([np.minimum(np.searchsorted(cum[g], points[g], side="right"), n - 1) for g in range(groups)])
     k.cum.from_numpy(cum.ravel())
     k.gtotal.from_numpy(cum[:, -1].copy())
-    k.u1.from_numpy(u1)
     k.xp.from_numpy(np.tile(np.arange(n, dtype=F32), groups))
     k.yp.from_numpy(np.zeros(groups * n, F32))
 
@@ -100,18 +97,27 @@ def test_branch_free_resampling_picks_what_the_walk_picks():
         for g in range(groups):
             k.resample_group(g)
 
-    for _ in range(2):  # the marks are reset for the next frame
+    for u in (u1, 1.0 - u1):  # a second frame with other points: no mark may be left from the first
+        points = (u[:, None] + np.arange(n)) * spacing[:, None]
+        expected = np.stack([np.minimum(np.searchsorted(cum[g], points[g], side="right"), n - 1)
+                             for g in range(groups)])
+        k.u1.from_numpy(u)
         resample_all()
         np.testing.assert_array_equal(read(k, "x").reshape(groups, n), expected.astype(F32))
+        assert (read(k, "first_copy").reshape(groups, n + 1)[:, :n] == -1).all()
     assert set(expected[2]) == {17} and np.array_equal(expected[1], np.arange(n))
+    with pytest.raises(ValueError, match="count 7 outside 0..6"):
+        k.start(np.zeros((groups, 3), F32), groups + 1)
 
 
+@pytest.mark.parametrize("layout", ["step_by_group", "step_by_particle"])
 @pytest.mark.parametrize("schedule", list(SCHEDULES))
 @pytest.mark.parametrize("shape", [(23, 37), (7, 7)])
-def test_kernels_match_the_numpy_twin(shape, schedule):
+def test_kernels_match_the_numpy_twin(shape, schedule, layout):
     """Random frames, candidates at the corners and edges (C = 1.2 px and σ₀ = 1.5 px send particles off the
     image), one candidate off the image altogether (every particle weighs 0: the "all alike" branch), a group
-    never started and two killed on the way, the drift ring (S = 3) wrapping round, 14 frames."""
+    never started and two killed on the way, the drift ring (S = 3) wrapping round, 14 frames; both loop
+    layouts of the kernel's step."""
     h, w = shape
     groups, n, s_drift = 7, 48, 3
     rng = np.random.default_rng(5)
@@ -140,7 +146,7 @@ def test_kernels_match_the_numpy_twin(shape, schedule):
                 kk.set_alive(alive)
         drift, motion = SCHEDULES[schedule](since)
         for kk in pair:
-            kk.step(k, since, drift, motion)
+            getattr(kk, layout)(k, since, drift, motion)
         assert_twins(*pair, max(shape), f"step {k} ({schedule})")
         off = (read(pair[0], "logw") <= NEG_INF).reshape(groups, n).sum(axis=1)
         off_image += int(off[[g for g in range(5) if read(pair[0], "alive")[g]]].sum())  # group 5: all of them

@@ -31,6 +31,11 @@ class TophatPFKernels:
         self.config = np.zeros(len(CONFIG), F32)
         self.seed = 0
 
+    @property
+    def live_count(self) -> int:
+        """The live groups (the kernel's host-side count, which chooses its loop layout)."""
+        return int((self.alive == 1).sum())
+
     def configure(self, seed: int, values) -> None:
         self.seed = int(seed)
         self.config[:] = np.asarray(values, F32)

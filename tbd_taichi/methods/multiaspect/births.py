@@ -3,7 +3,7 @@ target's cell is drawn from q = share·Λ/ΣΛ + (1 − share)·uniform over the
 single-frame likelihood map Λ(s*) = (1/K)·Σ_z exp ℓ(s*, z), and its weight is multiplied by f₀/q (f₀ uniform
 over the grid), so the filter's posterior is unchanged while births land where the frame shows something.  With
 the paper's bootstrap f₀ a 120×120 image and 8000 particles need many tens of frames to place a particle on an
-11×11 target at 6.5 dB; with q, a few."""
+9×9 (11×11 drawn) target at 6.5 dB; with q, a few."""
 from __future__ import annotations
 
 import numpy as np

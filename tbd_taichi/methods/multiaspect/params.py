@@ -42,7 +42,8 @@ class MultiaspectParams:
                    "aspect) or a .npy K×K column-stochastic file", symbol="G", source="Eq. 1, §4")
     templates: str = param("vehicle", doc="aspect templates: vehicle (the bruno2008 scenario's four, scaled by "
                            "ptcr) or a .npy (K, h, w) float stack, h, w odd, centroid at the centre, values in the "
-                           "input's units", symbol="a_kl(z)", source="Eq. 8")
+                           "input's units; cut to the centred box of the non-zero pixels (§2's r, l)",
+                           symbol="a_kl(z)", source="Eq. 8")
     ptcr: float = param(6.5, doc="the vehicle templates' peak over the clutter: max a = 10^(PTCR/20)·σ_c, σ_c "
                         "estimated on the first frame (templates=PATH: unused)", symbol="PTCR", unit="dB",
                         source="§4", low=-20, high=60)
@@ -66,8 +67,8 @@ class MultiaspectParams:
     mh_moves: int = param(1, doc="Metropolis–Hastings moves per frame (ma-rs)", source="§3.2, Eqs. 19–21", low=1,
                           high=100)
     mean_window: int | None = param(None, doc="side of the local-mean window removed before the GMRF (auto: 3 "
-                                    "sides of the templates' support, made odd, at least 15)", unit="px", source="§2 (\"suitable preprocessing\")",
-                                    low=3, high=10001, optional=True)
+                                    "sides of the templates' support, made odd, at least 15)", unit="px",
+                                    source="§2 (\"suitable preprocessing\")", low=3, high=10001, optional=True)
     gmrf: str = param("estimate", doc="clutter parameters: estimate (maximum likelihood of Eq. 13 every frame) or "
                       "BH,BV,SIGMA_C fixed", symbol="β_h, β_v, σ_c", source="Eqs. 9, 13, 14")
     log_det: str = param("exact", doc="ln det of Eq. 14 in the estimate: exact (DST-I eigenvalues) or "
