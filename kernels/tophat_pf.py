@@ -30,17 +30,17 @@ SUMMARY = ("x", "y", "s", "snr", "bx", "by", "neff", "loglik")  # per-group colu
 SUM_X, SUM_Y, SUM_S, SUM_SNR, SUM_BX, SUM_BY, SUM_NEFF, SUM_LOGLIK = range(len(SUMMARY))
 CONFIG = ("c", "sigma_v", "s_drift", "sigma_0")  # ``configure``'s values
 NEG_INF = -3.0e38
-EXPF_ZERO = -103.972076416015625  # -0x1.9fe368p6: libm's expf(x) is 0 below it (and slow: the underflow path)
 BY_GROUP_MIN = 4  # live groups from which a CPU step runs each group's whole step in one thread
 
 
-def by_group(live: int) -> bool:
-    """Whether a step of ``live`` groups runs each group in one thread (:meth:`TophatPFKernels.step_by_group`): on
-    a CPU from max(BY_GROUP_MIN, threads) groups, so that every thread has a group.  On a GPU (thread_span 1) one
-    thread per group would serialise each group's particles, so a GPU always steps by particle."""
-    if thread_span(False) == 1:
-        return False
-    return live >= max(BY_GROUP_MIN, impl.current_cfg().cpu_max_num_threads)
+def step_layout(live: int) -> str:
+    """The step kernel for ``live`` groups: ``step_by_group`` (each group's whole step in one thread) on a CPU from
+    max(BY_GROUP_MIN, threads) groups, so that every thread has a group; else ``step_by_particle``.  On a GPU
+    (thread_span 1) one thread per group would serialise each group's particles, so a GPU always steps by
+    particle."""
+    if thread_span(False) > 1 and live >= max(BY_GROUP_MIN, impl.current_cfg().cpu_max_num_threads):
+        return "step_by_group"
+    return "step_by_particle"
 
 
 @ti.data_oriented
@@ -178,11 +178,10 @@ class TophatPFKernels:
     def step(self, frame: int, since: int, drift: int, motion: int) -> None:
         """One SIR step of every live group on the current S_k (see the module's docstring); ``since``: frames
         since the filters started (the drift averages over min(S, since) displacements).  One launch, chosen by
-        :func:`by_group`: each group's whole step in one thread (its particles stay in the core's cache from the
+        :func:`step_layout`: each group's whole step in one thread (its particles stay in the core's cache from the
         propagation to the estimate), or the propagation spread over the particles.  Both give the same numbers.
-        A tracker calls the two kernels itself (through the launcher's fast path)."""
-        step = self.step_by_group if by_group(self.live_count) else self.step_by_particle
-        step(frame, since, drift, motion)
+        A tracker picks the kernel by :func:`step_layout` itself (through the launcher's fast path)."""
+        getattr(self, step_layout(self.live_count))(frame, since, drift, motion)
 
     @ti.kernel
     def step_by_particle(self, frame: ti.i32, since: ti.i32, drift: ti.i32, motion: ti.i32):
@@ -265,21 +264,11 @@ class TophatPFKernels:
         """Group g with log-weight maximum m: c_i = Σ_{l≤i} exp(lw_l − m) (f32 terms, the sums f64), the total,
         N̂_eff = (Σw)²/Σw² (Eq. 2.15), the mean likelihood log((Σ e^lw)/N) and Alg. 2's u₁ ~ U[0, 1)."""
         n = ti.static(self.n)
-        # the terms first, in a loop of their own: a call to exp inside the running sums' loop stalls them
-        if m > NEG_INF:
-            for i in range(g * n, (g + 1) * n):
-                t = self.logw[i] - m
-                # expf returns 0 below EXPF_ZERO, through a slow path (errno); skip it
-                wi = ti.cast(0.0, ti.f64)
-                if t >= EXPF_ZERO:
-                    wi = ti.cast(ti.exp(t), ti.f64)
-                self.cum[i] = wi
-        else:  # every particle off the image: keep them all alike
-            for i in range(g * n, (g + 1) * n):
-                self.cum[i] = 1.0
         s, s2 = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
         for i in range(g * n, (g + 1) * n):
-            wi = self.cum[i]
+            wi = ti.cast(1.0, ti.f64)  # every particle off the image (m = NEG_INF): keep them all alike
+            if m > NEG_INF:
+                wi = ti.cast(ti.exp(self.logw[i] - m), ti.f64)
             s += wi
             s2 += wi * wi
             self.cum[i] = s

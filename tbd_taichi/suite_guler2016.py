@@ -66,7 +66,7 @@ THESIS_SNR = {
 # setups (wall, motion, Δ). The thesis does not state its setup; the first is the notes' guess (§5.4): S1 Δ 30
 # Motion 1 for N and C (C = 0.5 matches Table 4.9), S1 Motion 2 Δ 20 for S (S = 3 matches Table 4.7's 0.1677).
 # There the likelihood pins the estimate to the lit pixel and S and C change little; the second setup, Δ 15 (the
-# faintest the thesis holds on S1), is where the filter must coast on B and a wide walk loses the pixel.
+# faintest the thesis reports on S1), is where the filter must coast on B and a wide walk loses the pixel.
 SWEEPS = {
     "N": dict(table="4.9", param="n_particles", setups=(("S1", 1, 30),), thesis={
         250: 0.39605, 500: 0.36482, 750: 0.35549, 1000: 0.35629, 1250: 0.34512, 1500: 0.3459, 1750: 0.34662,

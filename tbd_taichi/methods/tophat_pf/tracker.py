@@ -12,7 +12,7 @@ from ... import backend
 from ...engines import kernel_module
 from ...errors import InputError, ParameterError
 from ...io import stream_frame
-from ...kernels.tophat_pf import SUM_BX, SUM_BY, SUM_S, SUM_SNR, SUM_X, SUM_Y, by_group
+from ...kernels.tophat_pf import SUM_BX, SUM_BY, SUM_S, SUM_SNR, SUM_X, SUM_Y, step_layout
 from ...tables import TRACK_COLUMNS, _dtype, make_table
 from ...tophat import find_candidates
 from ..registry import OneSequence
@@ -130,8 +130,7 @@ class TophatPFTracker(OneSequence):
         end_1 = window_of(self.lengths, 0, FIRST_FRAMES)[1]
         learnt = self.p.drift and self.frame >= end_1  # B from window 1's path, at its last frame
         motion = learnt and self.frame > end_1 and self.p.weighting == "combined"  # Eq. 3.16 once B is there
-        step = self.k.step_by_group if by_group(self.k.live_count) else self.k.step_by_particle
-        step(self.frame, since, int(learnt), int(motion))
+        getattr(self.k, step_layout(self.k.live_count))(self.frame, since, int(learnt), int(motion))
         self.summaries.append(backend.to_host(self.k.summary))
         if not self.windows_on:  # Alg. 5 is over: only this frame's summary is read (its rows), so none piles up
             del self.summaries[:-1]
