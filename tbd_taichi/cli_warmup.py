@@ -44,7 +44,7 @@ def add_warmup_parser(sub, common) -> None:
                     help=f"frames per run, at least the method's minimum (default {DEFAULT_FRAMES})")
     wa.add_argument("--json", action="store_true", help="print one JSON object as the last line (the lines to "
                     "stderr): shape, runs (method, profile, kernels, compile_s, seconds), cache (path, files, "
-                    "new_files)")
+                    "new_files: written by this warmup)")
     common(wa)
     wa.set_defaults(func=cmd_warmup, check=check_warmup)
 
@@ -147,7 +147,7 @@ def cmd_warmup(args) -> int:
     shape, planned = args.checked
     say = (lambda line: print(line, file=sys.stderr, flush=True)) if args.json else print
     cache = compile_stats.cache_directory()
-    files_before = compile_stats.cache_file_count(cache)
+    started = time.time() - 1.0  # file times come from a coarse clock that can lag time.time() by a tick
     runs = []
     for spec, label, profile in planned:
         backend.shutdown()  # a fresh runtime for each run, as a `track` process has
@@ -161,9 +161,9 @@ def cmd_warmup(args) -> int:
         runs.append({"method": spec.name, "profile": label, "kernels": built.kernels,
                      "compile_s": round(built.seconds, 3), "seconds": round(seconds, 3)})
     backend.init(args.arch, threads=args.threads)  # the runtime the command started with, for callers in-process
-    files = compile_stats.cache_file_count(cache)
-    say(f"offline cache: {cache or 'none'}, {files} files (+{files - files_before} new)")
+    files, written = compile_stats.cache_file_count(cache), compile_stats.cache_file_count(cache, since=started)
+    say(f"offline cache: {cache or 'none'}, {files} files (+{written} new)")
     if args.json:
         print(json.dumps({"shape": [shape[0], shape[1]], "runs": runs,
-                          "cache": {"path": cache, "files": files, "new_files": files - files_before}}))
+                          "cache": {"path": cache, "files": files, "new_files": written}}))
     return 0

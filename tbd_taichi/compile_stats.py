@@ -90,12 +90,23 @@ def cache_directory() -> str | None:
     return path or None
 
 
-def cache_file_count(path: str | None = None) -> int:
-    """Files under the offline cache folder (0 where there is none)."""
+def cache_file_count(path: str | None = None, since: float | None = None) -> int:
+    """Files under the offline cache folder (0 where there is none); with ``since`` (a ``time.time()``), only those
+    written at or after it.  (Counting the files before and after a run undercounts what it wrote, even below 0:
+    Taichi trims the oldest entries when the cache passes its size cap.)"""
     path = path or cache_directory()
     if not path or not os.path.isdir(path):
         return 0
-    return sum(len(files) for _, _, files in os.walk(path))
+    if since is None:
+        return sum(len(files) for _, _, files in os.walk(path))
+    return sum(_written_since(os.path.join(root, f), since) for root, _, files in os.walk(path) for f in files)
+
+
+def _written_since(path: str, since: float) -> bool:
+    try:
+        return os.stat(path).st_mtime >= since
+    except FileNotFoundError:  # trimmed while we walked
+        return False
 
 
 def compile_totals() -> CompileCounts:

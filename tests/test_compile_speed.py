@@ -126,4 +126,23 @@ def test_the_offline_cache_folder_is_known_and_counted():
     path = compile_stats.cache_directory()
     assert path and compile_stats.cache_file_count(path) >= 0
     assert compile_stats.cache_file_count("/nonexistent/folder") == 0
+
+
+def test_the_files_a_run_wrote_are_counted_even_when_the_cache_trims(tmp_path):
+    """Taichi trims the oldest cache entries past its size cap, so 'after − before' can undercount (or go below 0);
+    ``since`` counts the files written from a moment on."""
+    import os
+    import time
+
+    old = [tmp_path / f"old{i}.tic" for i in range(3)]
+    for f in old:
+        f.write_text("x")
+        os.utime(f, (1_000_000_000, 1_000_000_000))
+    started = time.time() - 1.0  # file times come from a coarse clock (a tick behind time.time())
+    old[0].unlink()  # trimmed during the run
+    old[1].unlink()
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "new.tic").write_text("y")
+    assert compile_stats.cache_file_count(str(tmp_path)) == 2
+    assert compile_stats.cache_file_count(str(tmp_path), since=started) == 1
     assert backend.current() is not None
