@@ -88,7 +88,7 @@ class MMPHDParams:
     capture_above: float = param(0.8, doc="a detector class becomes a tracker when its peak cell holds at least "
                                  "this PHD mass", source="not in the paper", low=0, high=1, low_closed=False,
                                  high_closed=False)
-    confirm_above: float = param(0.8, doc="a tentative tracker (and the backward recursion) counts a frame as "
+    confirm_above: float = param(0.95, doc="a tentative tracker (and the backward recursion) counts a frame as "
                                  "tracked only when its class's peak cell holds at least this PHD mass (hysteresis: "
                                  "confirmed trackers hold on down to drop_below)", source="not in the paper", low=0,
                                  high=1, low_closed=False, high_closed=False)
@@ -98,6 +98,9 @@ class MMPHDParams:
     max_tracks: int = param(16, doc="trackers alive at once (pool size; a capture beyond it waits)",
                             source="not in the paper", low=1, high=1024)
     adaptive_q: bool = param(True, doc="adaptive process noise (Eq. 21); off: Q = Q_min", source="§3.2, Fig. 2")
+    start_q_max: bool = param(True, doc="with adaptive_q, a new tracker's first predictions use Q_max (its velocity is "
+                              "still the prior's; Eq. 21 adapts Q from its second tracked frame on); off: Q_min",
+                              source="not in the paper")
     likelihood_resampling: bool = param(True, doc="trackers resample ∝ ℓ (Eq. 24); off: ∝ w̃ (standard SMC-PHD)",
                                         source="§3.2, Eq. 24")
     detector_resampling: str = param("phd", doc="the detector resamples ∝ w̃ (phd: keeps its PHD's mass where it "

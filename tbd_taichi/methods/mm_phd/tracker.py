@@ -292,7 +292,8 @@ class MMPHDTracker(OneSequence):
             if len(self.targets) >= p.max_tracks:
                 break
             old = self._revived(k, c)
-            t = Target(self.next_id if old is None else old.track_id, c, k, L)
+            t = Target(self.next_id if old is None else old.track_id, c, k, L,
+                       scale=p.q_max_ratio if p.adaptive_q and p.start_q_max else 1.0)
             t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
             t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
             t.tracked(k)
