@@ -7,6 +7,7 @@ import numpy as np
 from ..kernels.phd import (BETA_ROW, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB,
                            EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
+                           RATIO_CAP, SHIFT_MAX,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOP, TOTAL)
 from .rng import normal, uniform
@@ -130,8 +131,8 @@ class PhdKernels:
             ll, cell, wgt = self.loglik[a:b], self.cell[a:b], self.weight[a:b]
             inside = cell >= 0
             measured = inside & (frames[self.gint[g, FRAME]][np.where(inside, cell, 0)] >= F32(th))
-            m = F32(ll.max()) if b > a else F32(LOG_ZERO)
-            lk = np.where(inside, np.exp(np.minimum(ll - m, 0)), F32(0)).astype(F32)
+            m = F32(min(ll.max(), SHIFT_MAX)) if b > a else F32(LOG_ZERO)
+            lk = np.where(inside, np.exp(np.minimum(ll - m, F32(RATIO_CAP))), F32(0)).astype(F32)
             psi = np.bincount(cell[measured], weights=(wgt * lk)[measured], minlength=self.shape[0] * self.shape[1])
             lam_m = F32(lam) * np.exp(F32(min(-float(m), 80.0)), dtype=F32)
             cell_psi = psi[np.where(inside, cell, 0)].astype(F32)
