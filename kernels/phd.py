@@ -37,8 +37,9 @@ DIM = 7
 MAX_MODELS = 4
 BETA_ROW = MAX_MODELS  # the row of model_cdf holding β
 LOG_ZERO = -1.0e30  # log ℓ of a particle outside the image
-# the update's scale: ℓ' = e^(log ℓ − s) with s = min(group's largest log ℓ, SHIFT_MAX), log ℓ − s capped at RATIO_CAP
-# (f32: λe^(−s) stays normal, a weak cell keeps its ℓ beside a very bright one, sums of ℓ' stay finite)
+# the update's scale: ℓ' = e^(log ℓ − s) with s = min(group's largest log ℓ, log λ + SHIFT_MAX), log ℓ − s
+# capped at RATIO_CAP (f32: λe^(−s) ≥ e^(−SHIFT_MAX) stays normal, so no denominator λe^(−s) + Ψ' is 0; a weak
+# cell keeps its ℓ beside a very bright one; sums of ℓ' stay finite)
 SHIFT_MAX, RATIO_CAP = 60.0, 75.0
 S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
@@ -235,8 +236,8 @@ class PhdKernels:
                miss: ti.f32):
         """Groups [first_group, first_group + n_groups), each in one thread.  The measurements are the cells of
         the group's frame with z ≥ ``th`` (§5.1's pre-segmentation; λ = 1 − Φ(Th) is their false-alarm rate).
-        With s = min(the group's largest log ℓ, SHIFT_MAX) and ℓ' = e^(min(log ℓ − s, RATIO_CAP)): Ψ'[cell] = Σ w·ℓ'
-        over the group's particles of that measurement cell (Eqs. 15–16), w̃ = wℓ'/(λe^(−s) + Ψ') = ℓw/(λ + Ψ)
+        With s = min(the group's largest log ℓ, log λ + SHIFT_MAX) and ℓ' = e^(min(log ℓ − s, RATIO_CAP)):
+        Ψ'[cell] = Σ w·ℓ' over the group's particles of that measurement cell (Eqs. 15–16), w̃ = wℓ'/(λe^(−s) + Ψ') = ℓw/(λ + Ψ)
         (Eq. 14; exact below the cap, log ℓ ≤ s + RATIO_CAP), and w̃ = ``miss``·w
         (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
@@ -255,12 +256,13 @@ class PhdKernels:
         m = ti.f32(LOG_ZERO)
         for p in range(a, b):
             m = ti.max(m, self.loglik[p])
-        m = ti.min(m, SHIFT_MAX)
+        log_lam = ti.log(lam)
+        m = ti.min(m, log_lam + SHIFT_MAX)
         src = self.gint[g, FRAME]
         for p in range(a, b):
             if self.measured(self.cell[p], src, th, w):
                 self.psi[g, self.cell[p]] += self.weight[p] * self.scaled_ratio(p, m)
-        lam_m = lam * ti.exp(ti.min(-m, 80.0))
+        lam_m = ti.exp(ti.min(log_lam - m, 80.0))
         n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
         for p in range(a, b):
             wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)

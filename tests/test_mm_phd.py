@@ -208,15 +208,17 @@ def test_cases_are_as_the_paper_says():
     assert spans == [(7, 28), (7, 28), (14, 33)]
 
 
-def test_a_very_bright_spot_after_an_empty_frame_keeps_the_phd_finite():
+@pytest.mark.parametrize("snr_db", [10.0, 20.0, 30.0])
+def test_a_very_bright_spot_after_an_empty_frame_keeps_the_phd_finite(snr_db):
     """A flat first frame (births of weight 0) and then a 40σ spot: log ℓ reaches the hundreds, where the former
-    update's λe^(−max log ℓ) underflowed to 0 and w̃ = 0/0 (a real clip crashed on it); n̂ stays finite."""
+    update's λe^(−max log ℓ) underflowed to 0 and w̃ = 0/0 (a real clip crashed on it); at 20 and 30 dB λ itself is
+    ≈ 10⁻¹⁴ and 0 (Th 7.7 and 29.3), where λe^(−60) underflowed as well; n̂ stays finite."""
     rng = np.random.default_rng(2)
     frames = rng.standard_normal((4, 40, 40)).astype(np.float32)
     frames[0] = 0.0
     frames[1:, 20, 20] += 40.0
     for engine in ("taichi", "numpy"):
-        tracker = tbd.make_tracker("mm-phd", (40, 40), seed=2, engine=engine)
+        tracker = tbd.make_tracker("mm-phd", (40, 40), seed=2, engine=engine, snr_db=snr_db)
         for frame in frames:
             tracker.update(frame)
         assert np.all(np.isfinite(tracker.tracker.n_hat_history)), engine

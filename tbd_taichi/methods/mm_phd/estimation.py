@@ -3,6 +3,7 @@ process noise (Eq. 21) and the backward recursion's gate (Eq. 25): small host-si
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,7 +88,7 @@ def captures(det: dict, n_hat: float, n_models: int, merge_distance: float, radi
     pick = rng.choice(len(w), size=draws, p=w / w.sum())
     state, model, cellmass = det["state"][pick], det["model"][pick], det["cellmass"][pick]
     pos = state[:, [X, Y]].astype(float)
-    labels = np.zeros(draws, int) if k == 1 else kmeans2(pos, min(k, draws), minit="++", seed=rng)[1]
+    labels = np.zeros(draws, int) if k == 1 else k_means_labels(pos, k, rng)
     labels = merged_labels(pos, labels, merge_distance)
     out = []
     for lab in np.unique(labels):
@@ -99,6 +100,17 @@ def captures(det: dict, n_hat: float, n_models: int, merge_distance: float, radi
         out.append(Capture(state[sel], model[sel], mean, d.T @ d / sel.sum(), probs, n_hat * sel.sum() / draws,
                            float(cellmass[sel].max())))
     return out
+
+
+def k_means_labels(pos: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    """k-means (k-means++ start) class labels of the points ``pos`` with at most ``k`` classes, and no more than
+    the distinct points (more would leave k-means++ nothing to draw from); a class emptied on the way is dropped."""
+    k = min(k, len(np.unique(pos, axis=0)))
+    if k < 2:
+        return np.zeros(len(pos), int)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "One of the clusters is empty", UserWarning)
+        return kmeans2(pos, k, minit="++", seed=rng)[1]
 
 
 def near_densest_pixel(pos: np.ndarray, members: np.ndarray, radius: float) -> np.ndarray:
@@ -113,19 +125,33 @@ def near_densest_pixel(pos: np.ndarray, members: np.ndarray, radius: float) -> n
 
 
 def merged_labels(pos: np.ndarray, labels: np.ndarray, distance: float) -> np.ndarray:
-    """``labels`` with the classes whose centres lie closer than ``distance`` joined (repeatedly, nearest pair
-    first)."""
-    labels = labels.copy()
+    """``labels`` with the classes whose centres (member means, px) lie closer than ``distance`` joined
+    (repeatedly, nearest pair first, the pair's later class into the earlier); the joined class's centre is the
+    mean of all its members.  O(k²) in the k classes: the centres and their gaps are updated, not recomputed."""
+    ids, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
+    k = len(ids)
+    if k < 2:
+        return labels.copy()
+    counts = counts.astype(float)
+    centres = np.stack([np.bincount(inverse, weights=pos[:, a], minlength=k) for a in range(2)], axis=1)
+    centres /= counts[:, None]
+    gaps = np.linalg.norm(centres[:, None] - centres[None], axis=2)
+    np.fill_diagonal(gaps, np.inf)
+    into = np.arange(k)
     while True:
-        ids = np.unique(labels)
-        if len(ids) < 2:
-            return labels
-        centres = np.array([pos[labels == i].mean(axis=0) for i in ids])
-        gaps = np.linalg.norm(centres[:, None] - centres[None], axis=2) + np.eye(len(ids)) * 1e9
         a, b = np.unravel_index(np.argmin(gaps), gaps.shape)
-        if gaps[a, b] >= distance:
-            return labels
-        labels[labels == ids[b]] = ids[a]
+        if not gaps[a, b] < distance:
+            break
+        a, b = min(a, b), max(a, b)
+        centres[a] = (counts[a] * centres[a] + counts[b] * centres[b]) / (counts[a] + counts[b])
+        counts[a] += counts[b]
+        into[into == b] = a
+        gaps[b, :] = gaps[:, b] = np.inf
+        live = np.isfinite(gaps[a]) | (np.arange(k) == a)
+        row = np.where(live, np.linalg.norm(centres - centres[a], axis=1), np.inf)
+        row[a] = np.inf
+        gaps[a, :] = gaps[:, a] = row
+    return ids[into][inverse]
 
 
 def gated(capture: Capture, dims, probability: float) -> np.ndarray:

@@ -16,6 +16,7 @@ from ..registry import param, validate_params
 PAPER_SWITCH = "0.8,0.1,0.1; 0.3,0.6,0.1; 0.3,0.1,0.6"  # Eq. 39, rows and columns (CV, C-CT, AC-CT)
 PAPER_BIRTH_MODELS = "0.8,0.1,0.1"  # §5.2: β = θ
 P_DETECT = 0.99  # §5.1: Th detects the weakest target with this probability per frame
+LAM_FLOOR = 1e-30  # λ = Φ(−Th) at least this (below it for Th > 11.4): the update takes log λ in f32
 
 
 @dataclass(frozen=True)
@@ -160,8 +161,8 @@ def default_birth_models(n: int) -> str:
 
 
 def derived(p: MMPHDParams) -> Derived:
-    """Th = A − Φ⁻¹(0.99) with A = 10^(SNR/20) (σ_n = 1) and λ = 1 − Φ(Th) (§5.1); I range [0.8·I(SNR),
-    1.2·I(SNR + 3 dB)] unless given; Π, β parsed; the window half-width ⌊3Σ⌋ (Eq. 18)."""
+    """Th = A − Φ⁻¹(0.99) with A = 10^(SNR/20) (σ_n = 1) and λ = 1 − Φ(Th) ≥ LAM_FLOOR (§5.1); I range
+    [0.8·I(SNR), 1.2·I(SNR + 3 dB)] unless given; Π, β parsed; the window half-width ⌊3Σ⌋ (Eq. 18)."""
     models = check_models(p.models)
     n = len(models)
     switch = parse_matrix(p.switch or default_switch(n), "switch (Π)", n, n)
@@ -174,7 +175,7 @@ def derived(p: MMPHDParams) -> Derived:
     if p.omega == 0 and any(m.endswith("ct") for m in models):
         raise ParameterError("omega = 0 with a coordinated-turn model (c-ct, ac-ct); a turn needs ω ≠ 0")
     i_floor = p.intensity_floor if p.intensity_floor is not None else i_min
-    return Derived(models, switch, birth, float(th), float(1.0 - ndtr(th)), (float(i_min), float(i_max)),
+    return Derived(models, switch, birth, float(th), max(float(ndtr(-th)), LAM_FLOOR), (float(i_min), float(i_max)),
                    float(i_floor), int(math.floor(3.0 * p.psf_sigma + 1e-9)), 3.0 * p.psf_sigma)
 
 
