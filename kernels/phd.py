@@ -256,13 +256,12 @@ class PhdKernels:
         m = ti.f32(LOG_ZERO)
         for p in range(a, b):
             m = ti.max(m, self.loglik[p])
-        log_lam = ti.log(lam)
-        m = ti.min(m, log_lam + SHIFT_MAX)
+        m = ti.min(m, ti.log(lam) + SHIFT_MAX)
         src = self.gint[g, FRAME]
         for p in range(a, b):
             if self.measured(self.cell[p], src, th, w):
                 self.psi[g, self.cell[p]] += self.weight[p] * self.scaled_ratio(p, m)
-        lam_m = ti.exp(ti.min(log_lam - m, 80.0))
+        lam_m = lam * ti.exp(ti.min(-m, 80.0))
         n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
         for p in range(a, b):
             wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)

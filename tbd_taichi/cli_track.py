@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import methods, metrics, tables, validate
-from .background import BACKGROUNDS
+from .background import BACKGROUNDS, REAL_VIDEO
 from .errors import TBDError
 from .methods.sgds.params import PAPER_SALIENCY
 from .profiles import PROFILES, describe, profile_settings, resolved_profile
@@ -82,8 +82,9 @@ def add_track_parser(sub, common) -> None:
                          "spatiotemporal (the spatial residual minus its running mean; the real-video profile), all "
                          "but none with a local noise σ")
     tr.add_argument("--min-peak-z", type=number(validate.positive, 0.0, True), default=None,
-                    help="sgds: report a confirmed track only while its running peak z (largest normalised value "
-                         "within 1 px) is at least this (paper profile 0: off; real-video profile 15)")
+                    help="sgds, mm-phd: report a confirmed track only while its running peak z (largest normalised "
+                         f"value within 1 px) is at least this (paper profile 0: off; real-video profile "
+                         f"{REAL_VIDEO['min_peak_z']:g})")
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", nargs="?", const="bar", default="auto", choices=("auto", "bar", "lines", "off"),

@@ -7,7 +7,7 @@ measured on the drone-ir clips: docs/methods/sgds.md#real-video).
 
 * ``paper``: the method's defaults;
 * ``real-video``: the method's defaults with the real-video settings it declares (a method takes those of
-  :data:`~.background.REAL_VIDEO` that are among its parameters and options);
+  :data:`~.background.REAL_VIDEO` that are among its parameters and options, and its spec's own ``real_video``);
 * ``auto`` (the default): ``real-video`` for camera recordings (a video file, a folder of images, integer-typed
   frames), ``paper`` for floating-point frames (the simulator's, or data normalised already).
 
@@ -49,7 +49,7 @@ def profile_settings(spec, profile: str) -> dict:
     if profile == "paper":
         return {}
     declared = {p.name for p in spec.param_infos()} | set(spec.options)
-    return {k: v for k, v in REAL_VIDEO.items() if k in declared}
+    return {**{k: v for k, v in REAL_VIDEO.items() if k in declared}, **spec.real_video}
 
 
 def describe(profile: str, why: str, settings: dict, given: dict | None = None) -> str:

@@ -465,7 +465,7 @@ def test_reused_fields_give_the_same_tracks(method):
 
 
 def test_peak_z_is_the_3x3_maximum_and_nan_outside():
-    from tbd_taichi.methods.sgds.confirmation import peak_z
+    from tbd_taichi.peak_guard import peak_z
 
     z = np.zeros((6, 7), np.float32)
     z[2, 3], z[0, 0], z[5, 6] = 4.0, 9.0, -1.0

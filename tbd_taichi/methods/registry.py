@@ -223,7 +223,8 @@ class MethodSpec:
     paper has them), validated; ``factory(shape, params, seed=, engine=, arch=, init_box=, **options)``: the
     tracker; ``options``: the run options (not the method's parameters) the factory also takes;
     ``aliases``: the CLI's method flags (dest names) that set a parameter, flag → parameter name; ``assumes``: what
-    the defaults assume about the input; ``scenario``: the simulator scenario it is evaluated on by default."""
+    the defaults assume about the input; ``scenario``: the simulator scenario it is evaluated on by default;
+    ``real_video``: its settings under the real-video profile beside the shared ones (:mod:`~tbd_taichi.profiles`)."""
 
     name: str
     title: str
@@ -245,6 +246,7 @@ class MethodSpec:
     bench_settings: Callable | None = None  # snr -> make_tracker keywords the bench uses (None: {"snr": snr})
     bench_scene: Mapping = field(default_factory=dict)  # the bench's simulate() keywords (targets, snr, motion)
     bench_frames: Callable | None = None  # (shape, n_frames, seed) -> the bench's frames, instead of simulate()
+    real_video: Mapping = field(default_factory=dict)  # its own real-video profile settings, over REAL_VIDEO's
 
     def __post_init__(self):
         if self.kind not in KINDS:

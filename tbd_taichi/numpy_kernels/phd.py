@@ -131,11 +131,10 @@ class PhdKernels:
             ll, cell, wgt = self.loglik[a:b], self.cell[a:b], self.weight[a:b]
             inside = cell >= 0
             measured = inside & (frames[self.gint[g, FRAME]][np.where(inside, cell, 0)] >= F32(th))
-            log_lam = np.log(F32(lam))
-            m = min(F32(ll.max()), F32(log_lam + F32(SHIFT_MAX))) if b > a else F32(LOG_ZERO)
+            m = min(F32(ll.max()), F32(np.log(F32(lam)) + F32(SHIFT_MAX))) if b > a else F32(LOG_ZERO)
             lk = np.where(inside, np.exp(np.minimum(ll - m, F32(RATIO_CAP))), F32(0)).astype(F32)
             psi = np.bincount(cell[measured], weights=(wgt * lk)[measured], minlength=self.shape[0] * self.shape[1])
-            lam_m = np.exp(F32(min(float(F32(log_lam - m)), 80.0)), dtype=F32)
+            lam_m = F32(lam) * np.exp(F32(min(-float(m), 80.0)), dtype=F32)
             cell_psi = psi[np.where(inside, cell, 0)].astype(F32)
             wt = np.where(measured, wgt * lk / (lam_m + cell_psi), np.where(inside, F32(miss) * wgt, F32(0)))
             self.cellmass[a:b] = np.where(measured, cell_psi / (lam_m + cell_psi), F32(0))

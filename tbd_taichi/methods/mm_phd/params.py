@@ -96,6 +96,11 @@ class MMPHDParams:
     confirm_share: float = param(0.5, doc="a tentative tracker's frame counts toward confirmation only when its "
                                  "class holds at least this share of its PHD mass n̂ (on noise the mass is spread "
                                  "over several bright cells)", source="not in the paper", low=0, high=1)
+    min_peak_z: float = param(0.0, doc="report a confirmed track only while its running peak z (the largest z "
+                              "within 1 px of its estimate, mean over frames) is at least this, and let trackers "
+                              "settled below it make room for waiting captures (0: off, as in the paper; the "
+                              "real-video profile's guard against clutter)", unit="σ",
+                              source="not in the paper", low=0)
     max_tracks: int = param(16, doc="trackers alive at once (pool size; a capture beyond it waits)",
                             source="not in the paper", low=1, high=1024)
     adaptive_q: bool = param(True, doc="adaptive process noise (Eq. 21); off: Q = Q_min", source="§3.2, Fig. 2")

@@ -22,6 +22,7 @@ from ...background import DEFAULT_BACKGROUND, Preprocessor
 from ...errors import InputError
 from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
+from ...peak_guard import SETTLE_FRAMES, running_peak_z
 from ...tables import TRACK_COLUMNS, _dtype
 from ..registry import OneSequence
 from .backward import BackwardRecursion
@@ -67,6 +68,8 @@ class Target:
     last_frame: int = -1  # the last tracked frame, and the position and velocity there
     last_position: np.ndarray = field(default_factory=lambda: np.zeros(2))
     last_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    peak_z: float = 0.0  # running peak z at its estimates (peak_guard; min_peak_z)
+    reported_span: tuple | None = None  # (first, last) frame it was reported in
 
     def tracked(self, k: int) -> None:
         """Frame k is tracked: keep it, the position and the velocity as the last tracked ones."""
@@ -180,7 +183,8 @@ class MMPHDTracker(OneSequence):
             raise InputError(f"{self.frames_in} frame(s), but MM-PHD needs at least {MIN_FRAMES} frames "
                              f"(a track is confirmed after {self.p.confirm_frames} tracked frames)")
         self._close_sequence()
-        rows = [] if not self.history else self.done_rows + [r for t in self.targets if t.confirmed for r in t.rows]
+        rows = [] if not self.history else self.done_rows + [r for t in self.targets if t.confirmed
+                                                             for r in self._kept_rows(t)]
         return self._table(rows)
 
     def _table(self, rows) -> np.ndarray:
@@ -214,8 +218,10 @@ class MMPHDTracker(OneSequence):
         if not self.targets:
             return released
         stats = [unpack(est[1 + i], len(self.d.models)) for i in range(len(self.targets))]
+        z = self.buffer[-1][1]
         for t, e, total in zip(self.targets, stats, n_hat[1:]):
             t.follow(e.mean, e.cov, e.mass, self.p.frame_interval)
+            t.peak_z = running_peak_z(t.peak_z, z, *t.position)
             t.mass = e.peak
             if e.peak >= p.drop_below:
                 t.drops = 0
@@ -223,10 +229,9 @@ class MMPHDTracker(OneSequence):
                 # a tentative track counts strong frames: a strong peak cell holding most of its PHD mass
                 t.streak += t.confirmed or (e.peak >= p.confirm_above and e.mass >= p.confirm_share * total)
                 t.rows.append(self._row(k, t.track_id, e.mean, e.probs, e.peak))
-                if t.confirmed:
-                    released.append(t.rows[-1])
-                elif t.streak >= p.confirm_frames:
+                if not t.confirmed and t.streak >= p.confirm_frames:
                     self._confirm(t, k)
+                if self._reported(t, k):
                     released.append(t.rows[-1])
             else:
                 t.streak, t.drops = 0, t.drops + 1
@@ -271,6 +276,7 @@ class MMPHDTracker(OneSequence):
         det_len = int(self.pool.gint[0, LENGTH])
         found = self._captures(k, n_hat[0], det_len) \
             if round(n_hat[0]) >= 1 and self.det_top[0] >= p.capture_above else []
+        self._evict_faint(k, len(found))
         out_len = [L] + [L] * len(self.targets)
         weights = [n_hat[0] / L] + [1.0 / L] * len(self.targets)  # a tracker holds one target (see docs)
         keep = [True] + [not t.halted for t in self.targets]
@@ -278,7 +284,7 @@ class MMPHDTracker(OneSequence):
             offset = self.pool.resample(k, out_len, weights, keep, room=p.births)
         for t in self.targets:
             if t.halted and t.confirmed:
-                self.done_rows.extend(t.rows)
+                self.done_rows.extend(self._kept_rows(t))
                 if t.drops >= p.halt_drops:  # lost, not halted as another track's duplicate
                     self.halted.append(t)
         self.halted = [t for t in self.halted if self._revivable(t, k)]
@@ -295,6 +301,7 @@ class MMPHDTracker(OneSequence):
             t = Target(self.next_id if old is None else old.track_id, c, k, L,
                        scale=p.q_max_ratio if p.adaptive_q and p.start_q_max else 1.0)
             t.follow(c.mean, c.cov, c.mass, self.p.frame_interval)
+            t.peak_z = running_peak_z(0.0 if old is None else old.peak_z, self.buffer[-1][1], *t.position)
             t.velocity_sd = p.vmax / np.sqrt(3.0)  # the tracker starts from Eq. 29's velocity prior
             t.tracked(k)
             t.rows.append(self._row(k, t.track_id, c.mean, c.probs, min(c.mass, 1.0)))
@@ -306,8 +313,40 @@ class MMPHDTracker(OneSequence):
                 self.next_id += 1
             else:
                 t.confirmed, t.streak = True, p.confirm_frames
-                released.append(t.rows[-1])
+                if self._reported(t, k):
+                    released.append(t.rows[-1])
         return released
+
+    def _evict_faint(self, k: int, waiting: int) -> None:
+        """With min_peak_z > 0 and more captures ``waiting`` than free trackers: halt the trackers that have had
+        SETTLE_FRAMES frames to reach the guard and stay below it, faintest first, one per capture without a
+        tracker.  Still clutter holds its tracker for good (its peak cell keeps the mass), and the guard would
+        never report it, while the target waits for a free tracker (docs/methods/mm-phd.md#real-video)."""
+        live = [t for t in self.targets if not t.halted]
+        excess = waiting - (self.p.max_tracks - len(live))
+        if self.p.min_peak_z <= 0 or excess <= 0:
+            return
+        faint = [t for t in live if k - t.first_frame >= SETTLE_FRAMES and t.peak_z < self.p.min_peak_z]
+        for t in sorted(faint, key=lambda t: t.peak_z)[:excess]:
+            t.halted = True
+
+    def _reported(self, t: Target, k: int) -> bool:
+        """Whether t's row of frame k is reported: t is confirmed and, with min_peak_z > 0, its running peak z is
+        at least min_peak_z (the real-video guard, :mod:`~tbd_taichi.peak_guard`); keeps the reported span."""
+        ok = t.confirmed and (self.p.min_peak_z <= 0 or t.peak_z >= self.p.min_peak_z)
+        if ok:
+            t.reported_span = (t.reported_span or (k,))[:1] + (k,)
+        return ok
+
+    def _kept_rows(self, t: Target) -> list:
+        """A confirmed track's whole path: every row (backward frames included); with min_peak_z > 0 the rows
+        from the first to the last frame it was reported in, as SGDS-PF's guard keeps them."""
+        if self.p.min_peak_z <= 0:
+            return t.rows
+        if t.reported_span is None:
+            return []
+        first, last = t.reported_span
+        return [r for r in t.rows if first <= r[0] <= last]
 
     def _revived(self, k: int, c: Capture) -> Target | None:
         """The lost confirmed track, last tracked 1 … revive_frames frames before k, whose position there moved on by

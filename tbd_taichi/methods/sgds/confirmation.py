@@ -9,12 +9,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...peak_guard import nearest_pixel
+
 DUPLICATE_RADIUS = 2.0  # px: tracks and potential targets closer than this are one target
 TRACK_MASK_HALF = math.ceil(DUPLICATE_RADIUS)  # px: half-side of the square around a track kept out of the search
 LOST_FRAMES = 3  # frames without an E = 1 particle after which a track ends
 MSW_LEF_OFFSET = 0.3  # ln MSW − the frame's best candidate LEF, measured with the printed MSW (msw_from_candidates)
 ICEF_LOWER = 0.1  # Eq. 40: ICEF = 1 for 0.1 ≤ MTW/MSW < 1 (at 200×200; scaled to the frame area)
-PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight on the newest frame
 
 
 @dataclass(eq=False)  # tracks are compared by identity (list membership, removal)
@@ -36,19 +37,6 @@ class Track:
 
     def last_xy(self) -> tuple[float, float]:
         return self.path[-1][1], self.path[-1][2]
-
-
-def nearest_pixel(x: float, y: float) -> tuple[int, int]:
-    """The pixel (column, row) whose centre is nearest to (x, y) (centres at integers)."""
-    return int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
-
-
-def peak_z(z: np.ndarray, x: float, y: float) -> float:
-    """The largest z in the 3×3 pixels around (x, y) (σ units; NaN outside the image)."""
-    h, w = z.shape
-    cx, cy = nearest_pixel(x, y)
-    window = z[max(cy - 1, 0):max(cy + 2, 0), max(cx - 1, 0):max(cx + 2, 0)]
-    return float(window.max()) if window.size else float("nan")
 
 
 def msw_from_candidates(best_lef: np.ndarray, width: int, tracked: list) -> float:

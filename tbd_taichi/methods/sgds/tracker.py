@@ -41,10 +41,11 @@ from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
 from ...particles import ParticlePool
+from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
-                           icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, nearest_pixel,
-                           peak_z, PEAK_RHO, scef, update_confidence, windowed_icef, within_duplicate_radius)
+                           icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
+                           update_confidence, windowed_icef, within_duplicate_radius)
 from ..registry import OneSequence
 from .params import SGDSParams
 from .populations import eliminated_per_population, resize_population, slab_populations
@@ -365,9 +366,7 @@ class SGDSPF(OneSequence):
         if self.p.min_peak_z <= 0:
             t.reported = t.reported or t.confirmed
             return t.confirmed
-        value = peak_z(z, *t.last_xy())
-        if math.isfinite(value):
-            t.peak_z += PEAK_RHO * (value - t.peak_z)
+        t.peak_z = running_peak_z(t.peak_z, z, *t.last_xy())
         ok = t.confirmed and t.peak_z >= self.p.min_peak_z
         t.reported = t.reported or ok
         if ok:
