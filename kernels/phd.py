@@ -38,9 +38,9 @@ MAX_MODELS = 4
 BETA_ROW = MAX_MODELS  # the row of model_cdf holding β
 LOG_ZERO = -1.0e30  # log ℓ of a particle outside the image
 # the update's scale: ℓ' = e^(log ℓ − s) with s = min(group's largest log ℓ, log λ + SHIFT_MAX), log ℓ − s
-# capped at RATIO_CAP (f32: λe^(−s) ≥ e^(−SHIFT_MAX) stays normal, so no denominator λe^(−s) + Ψ' is 0; a weak
-# cell keeps its ℓ beside a very bright one; sums of ℓ' stay finite)
-SHIFT_MAX, RATIO_CAP = 60.0, 75.0
+# capped at RATIO_CAP, so exact up to log ℓ = log λ + 150 (f32: λe^(−s) ≥ e^(−80) stays normal, so no denominator
+# λe^(−s) + Ψ' is 0; a weak cell keeps its ℓ beside a very bright one; a sum of ℓ' over 2·10⁶ particles ≤ 5·10³⁶)
+SHIFT_MAX, RATIO_CAP = 80.0, 70.0
 S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
 S_RESAMPLE = 15
@@ -238,7 +238,7 @@ class PhdKernels:
         the group's frame with z ≥ ``th`` (§5.1's pre-segmentation; λ = 1 − Φ(Th) is their false-alarm rate).
         With s = min(the group's largest log ℓ, log λ + SHIFT_MAX) and ℓ' = e^(min(log ℓ − s, RATIO_CAP)):
         Ψ'[cell] = Σ w·ℓ' over the group's particles of that measurement cell (Eqs. 15–16), w̃ = wℓ'/(λe^(−s) + Ψ') = ℓw/(λ + Ψ)
-        (Eq. 14; exact below the cap, log ℓ ≤ s + RATIO_CAP), and w̃ = ``miss``·w
+        (Eq. 14; exact below the cap, log ℓ ≤ s + RATIO_CAP, at least log λ + 150), and w̃ = ``miss``·w
         (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
         its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell and top its largest value.  Ψ is

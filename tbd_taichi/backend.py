@@ -186,12 +186,17 @@ def run_in_background(cpu: int) -> bool:
     worker thread that wakes for a parallel loop takes the CPU at once.  False where it cannot."""
     if not hasattr(os, "sched_setscheduler") or not hasattr(os, "SCHED_IDLE"):
         return False
-    try:
-        for tid in sorted(_thread_ids()):
-            os.sched_setaffinity(tid, {cpu})
-            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
-    except OSError:
-        return False
+    done: set = set()
+    while new := _thread_ids() - done:  # again until no thread appeared meanwhile (one started by a thread
+        for tid in sorted(new):        # not yet moved would inherit the normal policy)
+            try:
+                os.sched_setaffinity(tid, {cpu})
+                os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+            except ProcessLookupError:  # the thread has ended
+                pass
+            except OSError:
+                return False
+        done |= new
     return True
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import methods, metrics, tables, validate
-from .background import BACKGROUNDS, REAL_VIDEO
+from .background import BACKGROUNDS
 from .errors import TBDError
 from .methods.sgds.params import PAPER_SALIENCY
 from .profiles import PROFILES, describe, profile_settings, resolved_profile
@@ -31,6 +31,8 @@ def add_track_parser(sub, common) -> None:
                         description="Run a track-before-detect filter over INPUT and write the tracks CSV "
                                     "(frame,track_id,x,y,vx,vy,intensity,confidence; x = column, y = row, 0-based).")
     number, whole = validate.cli_number, validate.whole
+    real = {spec.name: profile_settings(spec, "real-video") for spec in methods.specs()}
+    guarded = {name: values["min_peak_z"] for name, values in real.items() if "min_peak_z" in values}
     tr.add_argument("input", metavar="INPUT", nargs="?", help="a .npy/.npz file, a video, or a folder of PNG/TIFF/BMP images")
     tr.add_argument("--method", choices=methods.names(), default="sgds",
                     help="the tracking method (default sgds); `tbd-taichi methods` lists them")
@@ -82,9 +84,9 @@ def add_track_parser(sub, common) -> None:
                          "spatiotemporal (the spatial residual minus its running mean; the real-video profile), all "
                          "but none with a local noise σ")
     tr.add_argument("--min-peak-z", type=number(validate.positive, 0.0, True), default=None,
-                    help="sgds, mm-phd: report a confirmed track only while its running peak z (largest normalised "
-                         f"value within 1 px) is at least this (paper profile 0: off; real-video profile "
-                         f"{REAL_VIDEO['min_peak_z']:g})")
+                    help=f"{', '.join(guarded)}: report a confirmed track only while its running peak z (largest "
+                         f"normalised value within 1 px) is at least this (paper profile 0: off; real-video profile "
+                         f"{', '.join(f'{v:g} ({m})' for m, v in guarded.items())})")
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")
     tr.add_argument("--progress", nargs="?", const="bar", default="auto", choices=("auto", "bar", "lines", "off"),

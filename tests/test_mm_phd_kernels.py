@@ -107,6 +107,35 @@ def test_kernels_match_twin(shape, rng):
     assert set(a["group_after"][950:955]) == {2}
 
 
+@pytest.mark.parametrize("lam", [1e-14, 1e-30])
+def test_update_matches_twin_beside_very_bright_pixels(lam, rng):
+    """Pixels of 40σ and 80σ and a small λ (Th 7.7 and the floor): the scale's shift is capped at log λ + 80 and
+    log ℓ − s at 70 for the brightest particles; both engines give the same finite w̃, cell masses and n̂."""
+    shape = (15, 19)
+    pools = make_pools(shape)
+    lengths = [700, 300]
+    _, z, _, _ = random_pool(pools, rng, shape, lengths)
+    z[5, 5] += 80.0
+    z[9, 12] += 40.0
+    cells = np.flatnonzero(z.ravel() >= 0.5).astype(np.int32)
+    full = np.arange(z.size, dtype=np.int32)
+    full[:cells.size] = cells
+    out = []
+    for k in pools:
+        k.put("raw", z)
+        k.put("cells", full)
+        k.likelihood(0, sum(lengths), 2, 0.7)
+        k.update(0, 2, lam, 1, 0.5, 0.01)
+        out.append({f: k.get(f)[:sum(lengths)] for f in ("loglik", "wtilde", "cellmass", "cdf")} | {"gout": k.get("gout")})
+    a, b = out
+    assert a["loglik"].max() > np.log(lam) + 80 + 70  # the cap is reached
+    for f in ("wtilde", "cellmass", "cdf", "gout"):
+        assert np.all(np.isfinite(a[f])) and np.all(np.isfinite(b[f])), f
+    np.testing.assert_allclose(a["wtilde"], b["wtilde"], rtol=2e-3, atol=1e-9)
+    np.testing.assert_allclose(a["cellmass"], b["cellmass"], rtol=2e-3, atol=1e-7)
+    np.testing.assert_allclose(a["gout"], b["gout"], rtol=2e-3)
+
+
 def test_erf_against_scipy():
     """The interpolated table on both engines within 1.2·10⁻⁷ (+ f32 rounding) of scipy over [−6, 6], and the two
     engines bit-equal."""

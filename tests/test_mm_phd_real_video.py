@@ -1,6 +1,6 @@
 """MM-PHD on real infrared video (tests/data/IR_DRONE_021, 303 frames, 320×256): what `track` gives with no flags
 (the real-video profile: spatio-temporal background, 20 dB, peak-z guard 18), and that the guard is what keeps
-the clutter out.  Measured (docs/results/drone_ir_default_mm_phd.md): detection 0.977, no false point, 1 track;
+the clutter out.  Measured (docs/results/drone_ir_default_mm_phd.md): detection 0.974, no false point, 1 track;
 without the guard ≈ 15 false points per frame (the 16 trackers held on clutter)."""
 from pathlib import Path
 

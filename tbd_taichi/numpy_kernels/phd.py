@@ -136,8 +136,10 @@ class PhdKernels:
             psi = np.bincount(cell[measured], weights=(wgt * lk)[measured], minlength=self.shape[0] * self.shape[1])
             lam_m = F32(lam) * np.exp(F32(min(-float(m), 80.0)), dtype=F32)
             cell_psi = psi[np.where(inside, cell, 0)].astype(F32)
-            wt = np.where(measured, wgt * lk / (lam_m + cell_psi), np.where(inside, F32(miss) * wgt, F32(0)))
-            self.cellmass[a:b] = np.where(measured, cell_psi / (lam_m + cell_psi), F32(0))
+            den = lam_m + cell_psi
+            wt = np.where(inside, F32(miss) * wgt, F32(0)).astype(F32)
+            np.divide(wgt * lk, den, out=wt, where=measured)  # off the measurements ℓ'/λe^(−s) may overflow
+            self.cellmass[a:b] = np.divide(cell_psi, den, out=np.zeros(b - a, F32), where=measured)
             rho = np.where(measured, lk, F32(miss) * lk) if on_likelihood else wt
             self.wtilde[a:b] = wt.astype(F32)
             self.cdf[a:b] = np.cumsum(rho.astype(F32), dtype=F32)

@@ -127,7 +127,8 @@ def near_densest_pixel(pos: np.ndarray, members: np.ndarray, radius: float) -> n
 def merged_labels(pos: np.ndarray, labels: np.ndarray, distance: float) -> np.ndarray:
     """``labels`` with the classes whose centres (member means, px) lie closer than ``distance`` joined
     (repeatedly, nearest pair first, the pair's later class into the earlier); the joined class's centre is the
-    mean of all its members.  O(k²) in the k classes: the centres and their gaps are updated, not recomputed."""
+    mean of all its members.  The centres and their gaps are updated per merge (O(k²): the argmin over the gaps),
+    not recomputed from the points."""
     ids, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
     k = len(ids)
     if k < 2:

@@ -97,7 +97,7 @@ class MMPHDParams:
                                  "class holds at least this share of its PHD mass n̂ (on noise the mass is spread "
                                  "over several bright cells)", source="not in the paper", low=0, high=1)
     min_peak_z: float = param(0.0, doc="report a confirmed track only while its running peak z (the largest z "
-                              "within 1 px of its estimate, mean over frames) is at least this, and let trackers "
+                              "within 1 px of its estimate, running mean with weight 0.1 a frame) is at least this, and let trackers "
                               "settled below it make room for waiting captures (0: off, as in the paper; the "
                               "real-video profile's guard against clutter)", unit="σ",
                               source="not in the paper", low=0)
