@@ -60,6 +60,14 @@ def random_pool(pools, rng, shape, lengths, masked=(1, 0, 0, 0)):
     return state, z, gint, gflt
 
 
+def birth_cells(z, th=0.5):
+    """The cells with z ≥ th, and the ``cells`` field's contents: those first, then the other cell indices."""
+    cells = np.flatnonzero(z.ravel() >= th).astype(np.int32)
+    full = np.arange(z.size, dtype=np.int32)
+    full[:cells.size] = cells
+    return cells, full
+
+
 @pytest.mark.parametrize("shape", [(21, 17), (8, 9)])
 def test_kernels_match_twin(shape, rng):
     """One whole step on both engines (odd sizes, particles across the borders): the same cells, log ℓ, w̃, n̂,
@@ -67,9 +75,7 @@ def test_kernels_match_twin(shape, rng):
     pools = make_pools(shape)
     lengths = [900, 500, 401, 7]
     state, z, gint, gflt = random_pool(pools, rng, shape, lengths)
-    cells = np.flatnonzero(z.ravel() >= 0.5).astype(np.int32)
-    full = np.arange(z.size, dtype=np.int32)
-    full[:cells.size] = cells
+    cells, full = birth_cells(z)
     out = []
     for k in pools:
         k.put("cells", full)
@@ -117,9 +123,7 @@ def test_update_matches_twin_beside_very_bright_pixels(lam, rng):
     _, z, _, _ = random_pool(pools, rng, shape, lengths)
     z[5, 5] += 80.0
     z[9, 12] += 40.0
-    cells = np.flatnonzero(z.ravel() >= 0.5).astype(np.int32)
-    full = np.arange(z.size, dtype=np.int32)
-    full[:cells.size] = cells
+    cells, full = birth_cells(z)
     out = []
     for k in pools:
         k.put("raw", z)
