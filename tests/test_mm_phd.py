@@ -60,7 +60,7 @@ def test_section_5_2_three_manoeuvring_targets():
 @pytest.mark.slow
 def test_section_5_3_launches():
     """§5.3's substitute scene with §5.3's settings, three seeds: the two 13 dB launches detected in most runs
-    and confirmed within 6 frames of their launch (frame 7); at most 2 false tracks (0 in 100 runs,
+    and confirmed within 6 frames of their launch (frame 7); at most 2 false tracks (3 in 100 runs,
     docs/results/long2012)."""
     detected, delays, false = 0, [], 0
     for seed in range(3):
@@ -76,17 +76,18 @@ def test_section_5_3_launches():
 
 
 @pytest.mark.slow
-def test_strict_confirmation_and_a_q_max_start_keep_section_5_3_free_of_false_tracks():
-    """Over §5.3's seeds 0–19 the defaults (a new tracker at Q_max, confirm_above 0.95) confirm no track of no
-    target and detect ≥ 85 % of run × targets (0 false tracks and 91.7 % in 100 runs); the former settings
-    (start_q_max off, confirm_above 0.8) confirm false tracks on the same seeds (3 here, 17 in 100 runs)."""
+def test_strict_confirmation_and_a_q_max_start_cut_section_5_3_false_tracks():
+    """Over §5.3's seeds 0–19 with §5.3's settings the defaults (a new tracker at Q_max, confirm_above 0.95)
+    confirm at most one track of no target and detect ≥ 90 % of run × targets (1 and 98.3 % here; 3 false
+    tracks and 97.7 % in 100 runs, docs/results/long2012); the former settings (start_q_max off, confirm_above
+    0.8) confirm several more on the same seeds (6 here)."""
     def pooled(**settings):
         res = [run("5.3", seed, **settings)[3] for seed in range(20)]
         return sum(r["false_tracks"] for r in res), sum(r["detected"] for r in res) / sum(r["n_targets"] for r in res)
 
     false, p_td = pooled()
-    assert false == 0 and p_td >= 0.85, (false, p_td)
-    assert pooled(start_q_max=False, confirm_above=0.8)[0] >= 2
+    assert false <= 1 and p_td >= 0.9, (false, p_td)
+    assert pooled(start_q_max=False, confirm_above=0.8)[0] >= false + 3
 
 
 def test_tracker_mass_on_a_target_and_after_it_vanishes():

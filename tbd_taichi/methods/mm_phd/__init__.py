@@ -12,9 +12,10 @@ from .tracker import MIN_FRAMES, MMPHDTracker, track_columns
 __all__ = ["MMPHDTracker", "MMPHDParams", "SECTION_5_3", "SPEC"]
 
 # §5.3's settings (Σ 0.6, T = 2 s, J_k = 5000, CA + the two turns; ω: a tenth of a half turn per frame), the
-# weakest target at 11 dB: the bench's and evaluate-suite's 5.3 runs
+# weakest target at 11 dB, and the scene's velocity range [−3, 3] px/s per axis as V_max (§5.3 states it with
+# the Viterbi-like baseline; docs/methods/mm-phd.md#choices): the bench's and evaluate-suite's 5.3 runs
 SECTION_5_3 = {"psf_sigma": 0.6, "frame_interval": 2.0, "births": 5000, "models": "ca,c-ct,ac-ct",
-               "omega": math.pi / 20, "snr_db": 11.0}
+               "omega": math.pi / 20, "snr_db": 11.0, "vmax": 3.0}
 
 # real still-camera video (drone-ir; docs/methods/mm-phd.md#real-video): Th = 7.7σ and I from 20 dB, where the
 # spatio-temporal z of clutter reaches tens of σ (at 10 dB the detector's n̂ ran to hundreds); the peak-z guard at
