@@ -15,7 +15,7 @@ from . import methods, metrics, tables, validate
 from .background import BACKGROUNDS
 from .errors import TBDError
 from .methods.sgds.params import PAPER_SALIENCY
-from .profiles import PROFILES, describe, profile_settings, resolved_profile
+from .profiles import PROFILES, check_real_video_needs, describe, profile_settings, resolved_profile
 
 IMPORTED_AT = time.monotonic()
 COMPILE_NOTE_S = 10.0  # a run that compiled longer than this says how to avoid it
@@ -223,6 +223,7 @@ def plan_track(args) -> TrackPlan | None:
     if Path(args.input).resolve() == out.resolve():
         raise TBDError(f"--out {out} is the input; give another path")
     profile, why = resolved_profile(requested_profile(args), source.kind, source.dtype)
+    check_real_video_needs(spec, profile, flagged)
     settings = {**profile_settings(spec, profile), **flagged}
     methods.checked_init_box(spec, init_box, source.shape)
     methods.checked_settings(spec, source.shape, settings)  # every value in range, and the memory, before any work

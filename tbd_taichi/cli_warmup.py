@@ -64,10 +64,11 @@ def chosen_methods(given: list[str] | None) -> list[str]:
 
 
 def profile_runs(spec, requested: str) -> list[tuple[str, str]]:
-    """(label, profile) of each run of method ``spec`` for ``--profile requested``: one run labelled "any" where
-    the paper and real-video profiles give the method the same settings."""
+    """(label, profile) of each run of method ``spec`` for ``--profile requested``: one run labelled "any", under
+    the paper profile, where the paper and real-video profiles give the method the same settings (the same
+    kernels; the real-video profile may also want parameters given, ``MethodSpec.real_video_needs``)."""
     if profile_settings(spec, "paper") == profile_settings(spec, "real-video"):
-        return [("any", "paper" if requested == "both" else requested)]
+        return [("any", "paper")]
     return [(p, p) for p in (("paper", "real-video") if requested == "both" else (requested,))]
 
 

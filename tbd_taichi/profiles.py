@@ -52,6 +52,17 @@ def profile_settings(spec, profile: str) -> dict:
     return {**{k: v for k, v in REAL_VIDEO.items() if k in declared}, **spec.real_video}
 
 
+def check_real_video_needs(spec, profile: str, given) -> None:
+    """Under the ``real-video`` profile, a ParameterError naming the first parameter of ``spec.real_video_needs``
+    not among the names ``given`` explicitly, and why camera data needs it (a method whose defaults model the
+    simulator's target only, as the multiaspect filters' vehicle templates)."""
+    if profile != "real-video":
+        return
+    for name, why in spec.real_video_needs.items():
+        if name not in given:
+            raise ParameterError(f"{spec.name} on real video needs {name} given: {why}")
+
+
 def describe(profile: str, why: str, settings: dict, given: dict | None = None) -> str:
     """One line for the user: the profile, why, the settings it chose, and those ``given`` explicitly instead."""
     def show(values: dict) -> str:

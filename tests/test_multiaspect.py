@@ -264,3 +264,27 @@ def test_paper_coordinates_convert_once_and_back():
     assert (float(x), float(y)) == (22.0, 64.0)
     xs, ys = np.array([0.0, 10.5, 119.0]), np.array([3.0, 0.0, 7.25])
     np.testing.assert_array_equal(np.array(paper_to_project(*project_to_paper(xs, ys))), np.array([xs, ys]))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_real_video_wants_the_templates_given(tmp_path, capsys, method):
+    """Under the real-video profile (auto's choice for integer frames) the vehicle templates are not assumed: the
+    CLI stops before any frame with one line naming templates, make_tracker raises at the first integer frame;
+    templates given explicitly, or the paper profile, run."""
+    from tbd_taichi.errors import ParameterError
+
+    frames = np.random.default_rng(0).integers(90, 110, (4, 32, 32)).astype(np.uint16)
+    np.save(tmp_path / "raw.npy", frames)
+    argv = ["track", str(tmp_path / "raw.npy"), "--method", method, "--out", str(tmp_path / "o.csv"),
+            "--progress", "off", "--param", "n_particles=200"]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{method} on real video needs templates given" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o.csv").exists()
+    assert cli.main(argv + ["--param", "templates=vehicle"]) == 0
+    assert cli.main(argv + ["--profile", "paper"]) == 0
+    auto = tbd.make_tracker(method, (32, 32), n_particles=200)
+    with pytest.raises(ParameterError, match="templates"):
+        auto.update(frames[0])
+    given = tbd.make_tracker(method, (32, 32), n_particles=200, templates="vehicle", profile="real-video")
+    given.update(frames[0])

@@ -129,7 +129,7 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     history, frontend_process).  ``profile`` (:mod:`tbd_taichi.profiles`): ``auto`` (the real-video settings for
     integer-typed frames, decided at the first frame), ``paper`` or ``real-video``; ``kw`` wins over it.  An
     unknown name, parameter or out-of-range value is a ParameterError."""
-    from ..profiles import check_profile, profile_settings
+    from ..profiles import check_profile, check_real_video_needs, profile_settings
     from ..validate import whole
     from .profiled import ProfiledTracker
 
@@ -145,6 +145,7 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     box = checked_init_box(spec, init_box, shape)
 
     def checked(chosen: str) -> tuple:
+        check_real_video_needs(spec, chosen, kw)
         return checked_settings(spec, shape, {**profile_settings(spec, chosen), **kw})
 
     def build(chosen: str):

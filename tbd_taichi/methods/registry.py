@@ -224,7 +224,9 @@ class MethodSpec:
     tracker; ``options``: the run options (not the method's parameters) the factory also takes;
     ``aliases``: the CLI's method flags (dest names) that set a parameter, flag → parameter name; ``assumes``: what
     the defaults assume about the input; ``scenario``: the simulator scenario it is evaluated on by default;
-    ``real_video``: its settings under the real-video profile beside the shared ones (:mod:`~tbd_taichi.profiles`)."""
+    ``real_video``: its settings under the real-video profile beside the shared ones (:mod:`~tbd_taichi.profiles`);
+    ``real_video_needs``: {parameter: why} that the real-video profile wants given explicitly, no default suiting
+    camera data (:func:`~tbd_taichi.profiles.check_real_video_needs`)."""
 
     name: str
     title: str
@@ -247,6 +249,7 @@ class MethodSpec:
     bench_scene: Mapping = field(default_factory=dict)  # the bench's simulate() keywords (targets, snr, motion)
     bench_frames: Callable | None = None  # (shape, n_frames, seed) -> the bench's frames, instead of simulate()
     real_video: Mapping = field(default_factory=dict)  # its own real-video profile settings, over REAL_VIDEO's
+    real_video_needs: Mapping = field(default_factory=dict)  # parameter → why real video needs it given
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -303,7 +306,8 @@ class MethodSpec:
 
         real = profile_settings(self, "real-video")
         lines.append("profiles: paper = the defaults below; real-video (auto's choice for videos, image folders and "
-                     "integer frames) = " + (", ".join(f"{k}={v}" for k, v in real.items()) or "the same"))
+                     "integer frames) = " + (", ".join(f"{k}={v}" for k, v in real.items()) or "the same")
+                     + "".join(f"; {k} must be given" for k in self.real_video_needs))
         lines.append("")
         for r in rows:
             lines.append("  ".join(c.ljust(w) for c, w in zip(r[:5], widths)) + "  " + r[5])

@@ -35,7 +35,14 @@ def method_spec(kind: str, name: str, title: str, section: str, rank: int) -> Me
         particle_count=lambda shape, params: particles(kind, params),
         extra_columns=lambda params: EXTRA_COLUMNS,
         bench_settings=lambda snr: {"prior": "paper"}, bench_frames=_bench_frames,
-        assumes=ASSUMES)
+        assumes=ASSUMES, real_video_needs={"templates": REAL_VIDEO_TEMPLATES})
+
+
+# why the real-video profile wants the templates given (docs/methods/multiaspect.md#real-video)
+REAL_VIDEO_TEMPLATES = ("the default, vehicle, is the bruno2008 simulator's target and matches no real one (on "
+                        "the drone-ir clips it holds a false track on the horizon in every frame); pass --param "
+                        "templates=PATH, a .npy (K, h, w) stack of the target's shapes in the input's units, or "
+                        "templates=vehicle to use the simulator's anyway")
 
 
 __all__ = ["MultiaspectParams", "MultiaspectTracker", "method_spec"]
