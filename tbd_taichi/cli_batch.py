@@ -6,10 +6,10 @@ import sys
 import uuid
 from pathlib import Path
 
-from . import batch, methods, validate
+from . import batch, io, methods, validate
 from .errors import TBDError
 from .executor import SCHEDULER_HELP, Fanout, check_scheduler
-from .profiles import PROFILES
+from .profiles import PROFILES, check_real_video_needs
 
 
 def add_batch_parser(sub, common) -> None:
@@ -52,7 +52,7 @@ def check_batch_track(args) -> list[batch.BatchItem]:
     if spec.needs_init_box:
         raise TBDError(f"--method {spec.name} needs each clip's first-frame box; track those clips one by one "
                        "with track --init-box")
-    spec.parse_assignments(args.param)
+    given = spec.parse_assignments(args.param)
     check_scheduler(args.scheduler)
     out_dir = Path(args.out_dir).expanduser()
     if out_dir.exists() and not out_dir.is_dir():
@@ -60,12 +60,20 @@ def check_batch_track(args) -> list[batch.BatchItem]:
     validate.output_path("--out-dir", out_dir / batch.SUMMARY if out_dir.is_dir() else out_dir)
     paths = batch.expand_inputs(args.inputs)
     names = batch.output_names(paths)
+    if args.profile == "real-video" or (args.profile == "auto" and any(camera_input(p) for p in paths)):
+        check_real_video_needs(spec, "real-video", given)
     batch.check_settings(out_dir, batch_settings(args))
     options = ["--method", args.method, "--profile", args.profile, "--seed", str(args.seed), "--engine", args.engine]
     options += [item for assignment in args.param for item in ("--param", assignment)]
     extras = tuple(extra for extra in batch.EXTRAS if getattr(args, extra))
     tag = uuid.uuid4().hex[:8]
     return [batch.plan_item(path, name, out_dir, options, extras, tag) for path, name in zip(paths, names)]
+
+
+def camera_input(path: Path) -> bool:
+    """Whether ``auto`` takes the real-video profile for ``path`` by its kind alone: a video or a folder of images
+    (an array file decides by its dtype, when it is tracked)."""
+    return path.is_dir() or path.suffix.lower() in io.VIDEO_SUFFIXES
 
 
 def batch_settings(args) -> dict:

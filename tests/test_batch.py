@@ -113,6 +113,7 @@ def test_bad_inputs_are_errors_before_any_work(tmp_path, inputs, message):
     (["--method", "feature-fusion"], "first-frame box"),
     (["--param", "nonsense=1"], "nonsense"),
     (["--scheduler", "http//bad"], "tcp://HOST:PORT"),
+    (["--method", "ma-rs", "--profile", "real-video"], "ma-rs on real video needs templates given"),
 ])
 def test_cli_checks_arguments_first(tmp_path, capsys, extra, message):
     clip = tmp_path / "clip.npy"

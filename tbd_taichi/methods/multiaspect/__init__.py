@@ -39,8 +39,8 @@ def method_spec(kind: str, name: str, title: str, section: str, rank: int) -> Me
 
 
 # why the real-video profile wants the templates given (docs/methods/multiaspect.md#real-video)
-REAL_VIDEO_TEMPLATES = ("the default, vehicle, is the bruno2008 simulator's target and matches no real one (on "
-                        "the drone-ir clips it holds a false track on the horizon in every frame); pass --param "
+REAL_VIDEO_TEMPLATES = ("the default, vehicle, is the bruno2008 simulator's target, not a real one (on "
+                        "9 of the 12 drone-ir clips it held a false track in every frame); pass --param "
                         "templates=PATH, a .npy (K, h, w) stack of the target's shapes in the input's units, or "
                         "templates=vehicle to use the simulator's anyway")
 
