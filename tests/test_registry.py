@@ -124,7 +124,7 @@ def write_scene(path, frames=12, shape=(32, 40)):
     (["--method", "sgds", "--param", "P_e=1.5"], r"SGDS-PF parameter P_e = 1.5 must be in \[0, 1\)"),
     (["--method", "sgds", "--param", "N_sump=many"], r"--param N_sump=many: N_sump takes a whole number"),
     (["--method", "sgds", "--particles", "100"], r"--particles applies to --method pf or mm-phd or .*, not sgds"),
-    (["--method", "pf", "--min-peak-z", "3"], r"--min-peak-z applies to --method sgds or mm-phd, not pf"),
+    (["--method", "tophat-pf", "--min-peak-z", "3"], r"--min-peak-z applies to --method sgds or pf or mm-phd, not tophat-pf"),
     (["--method", "pf", "--paths", "online"], r"--paths online applies to --method sgds or tophat-pf only"),
     (["--method", "pf", "--init-box", "1,2,3,4"], r"method pf takes no --init-box"),
     (["--method", "sgds", "--init-box", "1,2,3"], r"--init-box takes X,Y,W,H"),

@@ -21,6 +21,7 @@ from ..errors import ParameterError
 from ..background import DEFAULT_BACKGROUND, Preprocessor
 from .sgds.params import snr_band
 from ..particles import ParticlePool
+from ..peak_guard import SETTLE_FRAMES, running_peak_z
 from ..simulate import intensity_for_snr
 from ..tables import TRACK_DTYPE, make_table
 from .registry import MethodSpec, OneSequence, keyword_factory, param, validate_params
@@ -29,6 +30,11 @@ from .registry import MethodSpec, OneSequence, keyword_factory, param, validate_
 TABLE3 = {50: (10_000, 14_000, 18_000, 24_000, 30_000), 200: (14_000, 20_000, 25_000, 30_000, 60_000)}
 # Table 5 (320×256 semi-physical), SNR 2, 1.6, 1.2
 TABLE5 = (40_000, 82_000, 123_000)
+
+
+# the real-video guard's level for the one filter (docs/methods/pf.md#real-video): below SGDS-PF's 16, since the
+# PF's estimate is the particles' mean and a restart costs the search SETTLE_FRAMES frames
+REAL_VIDEO_MIN_PEAK_Z = 10.0
 
 
 def table3_particles(shape, snr: float) -> int:
@@ -73,6 +79,10 @@ class PFParams:
                              source="SGDS-PF Eq. 14", low=0, low_closed=False)
     vmax: float = param(1.0, doc="newborn speed U[0, vmax]", unit="px/frame", source="not in the paper", low=0)
     systematic: bool = param(False, doc="systematic instead of multinomial resampling", source="Eq. 18")
+    min_peak_z: float = param(0.0, doc="real-video guard: a declared target is reported only while its running "
+                              "peak z is at least this, and the search restarts (every particle absent) when it "
+                              "stays below for 10 frames (0: off; docs/methods/pf.md#real-video)", unit="σ",
+                              source="not in the paper", low=0)
 
 
 class OriginalPF(OneSequence):
@@ -85,12 +95,13 @@ class OriginalPF(OneSequence):
     def __init__(self, shape, snr: float = 1.4, seed: int = 0, engine: str = "taichi", arch: str | None = None,
                  n_particles: int | None = None, pb: float = 0.05, pd: float = 0.05, threshold: float = 0.5,
                  q1: float = 0.001, q2: float = 0.01, psf_sigma: float = 0.7, vmax: float = 1.0,
-                 background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, systematic: bool = False):
+                 background: str = DEFAULT_BACKGROUND, bad_pixels: bool = True, systematic: bool = False,
+                 min_peak_z: float = 0.0):
         if len(shape) != 2 or min(shape) < 5:
             raise ParameterError(f"shape must be (H, W) with H, W ≥ 5, got {shape}")
         self.params = validate_params(PFParams(snr=snr, n_particles=n_particles, pb=pb, pd=pd, threshold=threshold,
-                                               q1=q1, q2=q2, psf_sigma=psf_sigma, vmax=vmax, systematic=systematic),
-                                      "original PF")
+                                               q1=q1, q2=q2, psf_sigma=psf_sigma, vmax=vmax, systematic=systematic,
+                                               min_peak_z=min_peak_z), "original PF")
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_particles = int(n_particles or table3_particles(self.shape, snr))
         self.threshold, self.systematic = threshold, systematic
@@ -103,6 +114,7 @@ class OriginalPF(OneSequence):
         self.frame = 0
         self.track_id = 0
         self.declared = False
+        self.peak_z, self.declared_frames, self.restarts = 0.0, 0, 0  # the real-video guard (min_peak_z)
         self.rows: list[tuple] = []
         self.p_exist: list[float] = []
         self.seconds = {"normalise": 0.0, "filter": 0.0}
@@ -123,14 +135,32 @@ class OriginalPF(OneSequence):
         if p > self.threshold and np.isfinite(est.x[0]):
             if not self.declared:
                 self.track_id += 1
-                self.declared = True
-            out.append((self.frame, self.track_id, float(est.x[0]), float(est.y[0]), float(est.vx[0]),
-                        float(est.vy[0]), float(est.intensity[0]), p))
+                self.declared, self.peak_z, self.declared_frames = True, 0.0, 0
+            row = (self.frame, self.track_id, float(est.x[0]), float(est.y[0]), float(est.vx[0]), float(est.vy[0]),
+                   float(est.intensity[0]), p)
+            out = self._guarded(row, z)
         else:
             self.declared = False
         self.rows.extend(out)
         self.frame += 1
         return out
+
+    def _guarded(self, row: tuple, z: np.ndarray) -> list[tuple]:
+        """The declared ``row`` as reported under the real-video guard (min_peak_z > 0): kept while the running
+        peak z at the estimate (:func:`~tbd_taichi.peak_guard.running_peak_z`, from 0 at the declaration) is at
+        least min_peak_z; a target declared SETTLE_FRAMES frames and still below it is dropped and the search
+        restarts with every particle absent, so the one filter is not held by faint clutter for good."""
+        limit = self.params.min_peak_z
+        if limit <= 0:
+            return [row]
+        self.peak_z = running_peak_z(self.peak_z, z, row[2], row[3])
+        self.declared_frames += 1
+        if self.peak_z >= limit:
+            return [row]
+        if self.declared_frames >= SETTLE_FRAMES:
+            self.pool.set_state({0: {"x": np.zeros(self.n_particles, np.float32)}})  # E = 0 everywhere
+            self.declared, self.restarts = False, self.restarts + 1
+        return []
 
     def finish(self) -> np.ndarray:
         """Every declared row as a tracks table."""
@@ -156,9 +186,10 @@ SPEC = MethodSpec(
                 "the baseline of SGDS-PF's comparisons",
     params=PFParams, factory=keyword_factory(OriginalPF), make_params=pf_params,
     options=("background", "bad_pixels"),
-    aliases={"snr": "snr", "particles": "n_particles", "threshold": "threshold"},
-    rank=1, particle_count=pf_particles,
+    aliases={"snr": "snr", "particles": "n_particles", "threshold": "threshold", "min_peak_z": "min_peak_z"},
+    rank=1, particle_count=pf_particles, real_video={"min_peak_z": REAL_VIDEO_MIN_PEAK_Z},
     assumes=("one point target at a time (Gaussian PSF, Σ = 0.7 px), nearly constant velocity ≤ 1 px/frame; peak "
              "SNR ≥ snr (1.4; Table 3 particles for it); background: paper profile the frame's median, white "
-             "Gaussian noise of σ from the MAD; real-video profile a spatiotemporal background and local σ, snr 5"),
+             "Gaussian noise of σ from the MAD; real-video profile a spatiotemporal background and local σ, snr 5, "
+             f"the peak-z guard at {REAL_VIDEO_MIN_PEAK_Z:g}"),
 )
