@@ -6,6 +6,8 @@ import sys
 import uuid
 from pathlib import Path
 
+import numpy as np
+
 from . import batch, io, methods, validate
 from .errors import TBDError
 from .executor import SCHEDULER_HELP, Fanout, check_scheduler
@@ -71,9 +73,16 @@ def check_batch_track(args) -> list[batch.BatchItem]:
 
 
 def camera_input(path: Path) -> bool:
-    """Whether ``auto`` takes the real-video profile for ``path`` by its kind alone: a video or a folder of images
-    (an array file decides by its dtype, when it is tracked)."""
-    return path.is_dir() or path.suffix.lower() in io.VIDEO_SUFFIXES
+    """Whether ``auto`` takes the real-video profile for ``path``: a video, a folder of images or a .npy of integers
+    (its header read only; a .npz, or a file that cannot be read, decides when it is tracked)."""
+    if path.is_dir() or path.suffix.lower() in io.VIDEO_SUFFIXES:
+        return True
+    if path.suffix.lower() != ".npy":
+        return False
+    try:
+        return np.load(path, mmap_mode="r").dtype.kind in "iub"
+    except (OSError, ValueError):
+        return False
 
 
 def batch_settings(args) -> dict:

@@ -85,7 +85,8 @@ def add_track_parser(sub, common) -> None:
                          "but none with a local noise σ")
     tr.add_argument("--min-peak-z", type=number(validate.positive, 0.0, True), default=None,
                     help=f"{', '.join(guarded)}: report a confirmed track only while its running peak z (largest "
-                         f"normalised value within 1 px) is at least this (paper profile 0: off; real-video profile "
+                         f"normalised value within 1 px) is at least this; below it pf restarts its search and mm-phd "
+                         f"frees the tracker for a waiting capture (paper profile 0: off; real-video profile "
                          f"{', '.join(f'{v:g} ({m})' for m, v in guarded.items())})")
     tr.add_argument("--no-bad-pixels", action="store_true",
                     help="keep persistent single-pixel outliers (hot, dead, blinking pixels) instead of zeroing them")

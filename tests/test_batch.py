@@ -127,6 +127,22 @@ def test_cli_checks_arguments_first(tmp_path, capsys, extra, message):
     assert not (tmp_path / "out").exists()
 
 
+def test_auto_profile_checks_the_real_video_needs_of_integer_inputs_first(tmp_path, capsys):
+    """batch-track --method ma-rs under auto: an integer .npy among the inputs (camera data: the real-video profile)
+    stops the batch before any input with the one-line need; float inputs alone (the paper profile) do not."""
+    np.save(tmp_path / "raw.npy", np.zeros((4, 16, 16), np.uint16))
+    np.save(tmp_path / "sim.npy", np.zeros((4, 16, 16), np.float32))
+    out = tmp_path / "out"
+    assert cli.main(["batch-track", str(tmp_path / "sim.npy"), str(tmp_path / "raw.npy"), "--method", "ma-rs",
+                     "--out-dir", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "ma-rs on real video needs templates given" in err and err.count("\n") == 0 and not out.exists()
+    from tbd_taichi.cli_batch import camera_input
+
+    assert camera_input(tmp_path / "raw.npy") and not camera_input(tmp_path / "sim.npy")
+    assert camera_input(tmp_path) and camera_input(tmp_path / "clip.mp4")
+
+
 def test_scheduler_without_distributed_says_what_to_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
     with pytest.raises(TBDError, match=r"pip install 'tbd-taichi\[cluster\]'"):

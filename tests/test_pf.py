@@ -98,7 +98,8 @@ def clutter_then_target(seed: int, n_frames: int = 60, shape=(48, 48)):
 @pytest.mark.parametrize("engine", ["taichi", "numpy"])
 def test_the_peak_z_guard_frees_the_filter_from_faint_clutter(engine):
     """min_peak_z (the real-video guard): without it the one filter declares the still clutter of peak z 6 and
-    stays on it when a target of peak z 25 appears (53 rows on the clutter, none on the target, seed 0); with 10
+    stays on it when a target of peak z 25 appears (53 rows on the clutter, none on the target; noise seed 1,
+    tracker seed 0); with 10
     the clutter is never reported, the search restarts once and follows the target (30 of its 40 frames; ≥ 20
     asked, the first frames go to the restart and to the running peak's rise)."""
     frames, where = clutter_then_target(seed=1)

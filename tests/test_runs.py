@@ -26,9 +26,10 @@ def test_auto_picks_the_profile_by_the_input(kind, dtype, expected):
 
 
 def test_a_profile_gives_a_method_only_the_settings_it_declares():
-    sgds, pf = tbd.methods.get("sgds"), tbd.methods.get("pf")
+    sgds, pf, tophat = tbd.methods.get("sgds"), tbd.methods.get("pf"), tbd.methods.get("tophat-pf")
     assert profile_settings(sgds, "real-video") == REAL_VIDEO
-    assert profile_settings(pf, "real-video") == {k: v for k, v in REAL_VIDEO.items() if k != "min_peak_z"}
+    assert profile_settings(pf, "real-video") == {**REAL_VIDEO, "min_peak_z": 10.0}  # its own level over the shared
+    assert profile_settings(tophat, "real-video") == {}  # declares none of REAL_VIDEO's keys
     assert profile_settings(sgds, "paper") == {}
     line = describe("real-video", "why", REAL_VIDEO, {"snr": 3.0, "history": False})
     assert "min_peak_z=16" in line and "given instead: snr=3" in line and "history" not in line

@@ -42,7 +42,7 @@ def method_spec(kind: str, name: str, title: str, section: str, rank: int) -> Me
 REAL_VIDEO_TEMPLATES = ("the default, vehicle, is the bruno2008 simulator's target, not a real one (on "
                         "9 of the 12 drone-ir clips it held a false track in every frame); pass --param "
                         "templates=PATH, a .npy (K, h, w) stack of the target's shapes in the input's units, or "
-                        "templates=vehicle to use the simulator's anyway")
+                        "templates=vehicle to use the simulator's anyway (templates=... in make_tracker)")
 
 
 __all__ = ["MultiaspectParams", "MultiaspectTracker", "method_spec"]
