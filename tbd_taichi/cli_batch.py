@@ -11,7 +11,7 @@ import numpy as np
 from . import batch, io, methods, validate
 from .errors import TBDError
 from .executor import SCHEDULER_HELP, Fanout, check_scheduler
-from .profiles import PROFILES, check_real_video_needs
+from .profiles import PROFILES, check_real_video_needs, resolved_profile
 
 
 def add_batch_parser(sub, common) -> None:
@@ -73,16 +73,19 @@ def check_batch_track(args) -> list[batch.BatchItem]:
 
 
 def camera_input(path: Path) -> bool:
-    """Whether ``auto`` takes the real-video profile for ``path``: a video, a folder of images or a .npy of integers
-    (its header read only; a .npz, or a file that cannot be read, decides when it is tracked)."""
+    """Whether ``auto`` takes the real-video profile for ``path`` (:func:`~tbd_taichi.profiles.resolved_profile`
+    on its kind and, for a .npy, the dtype in its header; a .npz, or a file that cannot be read, decides when it
+    is tracked)."""
     if path.is_dir() or path.suffix.lower() in io.VIDEO_SUFFIXES:
-        return True
-    if path.suffix.lower() != ".npy":
+        kind, dtype = ("folder" if path.is_dir() else "video"), None
+    elif path.suffix.lower() == ".npy":
+        try:
+            kind, dtype = "array", np.load(path, mmap_mode="r").dtype
+        except (OSError, ValueError):
+            return False
+    else:
         return False
-    try:
-        return np.load(path, mmap_mode="r").dtype.kind in "iub"
-    except (OSError, ValueError):
-        return False
+    return resolved_profile("auto", kind, dtype)[0] == "real-video"
 
 
 def batch_settings(args) -> dict:
