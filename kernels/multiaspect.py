@@ -48,6 +48,9 @@ SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # colum
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
 LANES = 4  # partial sums of λ (Eq. 15) kept apart
+MEMO_BITS = 5
+MEMO = 1 << MEMO_BITS  # entries of a run's λ cache (:meth:`MultiaspectKernels.lambda_memo`)
+RUN = 256  # slots per run of the particle loops on a CPU (:meth:`MultiaspectKernels.lambda_memo`)
 SERIAL_PIXELS = 1 << 16  # d-maps up to this many pixels are computed in the launching thread (no task start)
 
 
@@ -118,6 +121,11 @@ class MultiaspectKernels:
         self.serial_groups = serial or self.groups == 1
         self.span = thread_span(self.serial_groups)
         self.serial_pixels = serial or self.groups * h * w <= SERIAL_PIXELS  # a small d-map: one thread, no task
+        # the particle loops walk runs of RUN consecutive slots, one thread each, reusing λ between neighbours
+        # (:meth:`lambda_memo`); on a GPU (span 1) a run is one slot
+        self.span_particles = thread_span(serial)
+        self.run = RUN if self.span_particles > 1 else 1
+        self.runs = -(-c // self.run)
 
     # ------------------------------------------------------------------ Eq. 16
 
@@ -134,12 +142,27 @@ class MultiaspectKernels:
                     self.gpar[g, i] = gpar[g, i]
             bh, bv = gpar[g, 0], gpar[g, 1]
             base = self.d_index(g, r + 2 * hh, 2 * hw)
-            for c in range(w):
-                left = y[g, r, c - 1] if c > 0 else 0.0
-                right = y[g, r, c + 1] if c < w - 1 else 0.0
-                up = y[g, r - 1, c] if r > 0 else 0.0
-                down = y[g, r + 1, c] if r < h - 1 else 0.0
-                self.d[base + c] = y[g, r, c] - bh * (left + right) - bv * (up + down)
+            # the row's pixels with both horizontal neighbours in one branch-free pass, then its two end pixels
+            if r > 0 and r < h - 1:
+                for c in range(1, w - 1):
+                    self.d[base + c] = y[g, r, c] - bh * (y[g, r, c - 1] + y[g, r, c + 1]) \
+                        - bv * (y[g, r - 1, c] + y[g, r + 1, c])
+            else:
+                for c in range(1, w - 1):
+                    self.d[base + c] = y[g, r, c] - bh * (y[g, r, c - 1] + y[g, r, c + 1]) - bv * self.vertical(y, g, r, c)
+            for c in ti.static(range(2)):
+                col = c * (w - 1)
+                left = y[g, r, col - 1] if col > 0 else 0.0
+                right = y[g, r, col + 1] if col < w - 1 else 0.0
+                self.d[base + col] = y[g, r, col] - bh * (left + right) - bv * self.vertical(y, g, r, col)
+
+    @ti.func
+    def vertical(self, y: ti.template(), g: ti.i32, r: ti.i32, c: ti.i32) -> ti.f32:
+        """y's pixels above and below (r, c), 0 outside the image (Eq. 16's zero boundary)."""
+        h = ti.static(self.shape[0])
+        up = y[g, r - 1, c] if r > 0 else 0.0
+        down = y[g, r + 1, c] if r < h - 1 else 0.0
+        return up + down
 
     @ti.func
     def d_index(self, g: ti.i32, row: ti.i32, col: ti.i32) -> ti.i32:
@@ -210,37 +233,42 @@ class MultiaspectKernels:
         k_enter = key_prefix(seed, frame, base + S_ENTER)
         kn = [key_prefix(seed, frame, base + S_NOISE + i) for i in ti.static(range(4))]
         k_move = key_prefix(seed, frame, S_MOVE + stage)
-        for p in range(self.capacity):
-            q = (self.anc[p] if from_ancestor != 0 else p) + side * self.capacity
-            z = self.prev_z[q]
-            x, vx, y, vy = self.prev[q, 0], self.prev[q, 1], self.prev[q, 2], self.prev[q, 3]
-            n = normals_at(self.tables.w, self.tables.k, self.tables.phi, kn, p)
-            moved = ti.Vector([x + vx + motion[0] * n[0], vx + motion[1] * n[0] + motion[2] * n[1],
-                               y + vy + motion[0] * n[2], vy + motion[1] * n[2] + motion[2] * n[3]], dt=ti.f32)
-            u_exit, u_asp = uniform_at(k_exit, p), uniform_at(k_asp, p)
-            new_z = 0
-            self.blw[p] = 0.0
-            if z != 0:
-                stays = self.on_grid(moved[0], moved[2])
-                if coupled == 0:
-                    stays = u_exit < self.p_inside(x + vx, y + vy, motion[0])
-                if stays:
-                    new_z = self.next_aspect(z, u_asp)
-            elif uniform_at(k_enter, p) < p_a:
-                new_z = 1 + ti.min(ti.cast(u_asp * self.k, ti.i32), self.k - 1)
-                moved = self.law_draw(seed, frame, base + S_F0, p, law)
-                if data_births != 0:
-                    g = p // self.n
-                    cell = self.birth_cell(g, uniform_f64_at(key_prefix(seed, frame, base + S_BIRTH_CELL), p))
-                    moved[0] = self.cell_column(cell) + (moved[0] - law[0]) / (law[1] - law[0]) - 0.5
-                    moved[2] = self.cell_row(cell) + (moved[2] - law[2]) / (law[3] - law[2]) - 0.5
-                    self.blw[p] = self.birth_lq[g, cell]
-            for i in ti.static(range(STATE)):
-                self.prop[p, i] = moved[i]
-            self.prop_z[p] = new_z
-            self.prop_ll[p] = self.log_ratio(p)
-            if move != 0:
-                self.metropolis_hastings(p, uniform_at(k_move, p), move == 2, 1 - side)
+        span, run = ti.static(self.span_particles, self.run)
+        for it in range(self.runs * span):
+            if it % span == 0:  # one run of `run` slots in this thread (:meth:`lambda_memo`)
+                keys, lams = ti.Vector([-1] * MEMO, dt=ti.i32), ti.Vector([0.0] * MEMO, dt=ti.f32)
+                for p in range(it // span * run, ti.min((it // span + 1) * run, self.capacity)):
+                    q = (self.anc[p] if from_ancestor != 0 else p) + side * self.capacity
+                    z = self.prev_z[q]
+                    x, vx, y, vy = self.prev[q, 0], self.prev[q, 1], self.prev[q, 2], self.prev[q, 3]
+                    n = normals_at(self.tables.w, self.tables.k, self.tables.phi, kn, p)
+                    moved = ti.Vector([x + vx + motion[0] * n[0], vx + motion[1] * n[0] + motion[2] * n[1],
+                                       y + vy + motion[0] * n[2], vy + motion[1] * n[2] + motion[2] * n[3]], dt=ti.f32)
+                    u_exit, u_asp = uniform_at(k_exit, p), uniform_at(k_asp, p)
+                    new_z = 0
+                    self.blw[p] = 0.0
+                    if z != 0:
+                        stays = self.on_grid(moved[0], moved[2])
+                        if coupled == 0:
+                            stays = u_exit < self.p_inside(x + vx, y + vy, motion[0])
+                        if stays:
+                            new_z = self.next_aspect(z, u_asp)
+                    elif uniform_at(k_enter, p) < p_a:
+                        new_z = 1 + ti.min(ti.cast(u_asp * self.k, ti.i32), self.k - 1)
+                        moved = self.law_draw(seed, frame, base + S_F0, p, law)
+                        if data_births != 0:
+                            g = p // self.n
+                            cell = self.birth_cell(g, uniform_f64_at(key_prefix(seed, frame, base + S_BIRTH_CELL), p))
+                            moved[0] = self.cell_column(cell) + (moved[0] - law[0]) / (law[1] - law[0]) - 0.5
+                            moved[2] = self.cell_row(cell) + (moved[2] - law[2]) / (law[3] - law[2]) - 0.5
+                            self.blw[p] = self.birth_lq[g, cell]
+                    for i in ti.static(range(STATE)):
+                        self.prop[p, i] = moved[i]
+                    self.prop_z[p] = new_z
+                    key, lam = self.lambda_memo(p, keys, lams)
+                    self.prop_ll[p] = self.log_ratio(p, key, lam)
+                    if move != 0:
+                        self.metropolis_hastings(p, uniform_at(k_move, p), move == 2, 1 - side)
 
     @ti.func
     def birth_cell(self, g: ti.i32, u: ti.f64) -> ti.i32:
@@ -305,29 +333,67 @@ class MultiaspectKernels:
     @ti.kernel
     def likelihood(self):
         """prop_ll for every slot (:meth:`log_ratio`); :meth:`propagate` does this for the slots it draws."""
-        for p in range(self.capacity):
-            self.prop_ll[p] = self.log_ratio(p)
+        span, run = ti.static(self.span_particles, self.run)
+        for it in range(self.runs * span):
+            if it % span == 0:
+                keys, lams = ti.Vector([-1] * MEMO, dt=ti.i32), ti.Vector([0.0] * MEMO, dt=ti.f32)
+                for p in range(it // span * run, ti.min((it // span + 1) * run, self.capacity)):
+                    key, lam = self.lambda_memo(p, keys, lams)
+                    self.prop_ll[p] = self.log_ratio(p, key, lam)
 
     @ti.func
-    def log_ratio(self, p: ti.i32) -> ti.f32:
-        """(2λ − ρ)/(2σ_c²) for a present particle prop[p] on the extended grid, else 0 (Eqs. 10, 12, 15), plus the
-        birth correction blw[p] (0 unless the particle entered from the data-driven proposal).  λ sums d under the
-        aspect's non-zero pixels, read from the padded d without bounds checks (pixels off the image read 0)."""
+    def lambda_key(self, p: ti.i32) -> ti.i32:
+        """(corner, aspect) of prop[p] as one integer: the padded d's flat index of the template's top-left pixel
+        times K plus z − 1; −1 for an absent particle or one off the extended grid (ℓ = 0)."""
         hh, hw = ti.static(self.halves)
         z = self.prop_z[p]
-        out = ti.f32(0.0)
+        key = -1
         if z != 0 and self.on_grid(self.prop[p, 0], self.prop[p, 2]):
-            g = p // self.n
             c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
             r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
-            corner = self.d_index(g, r + hh, c + hw)  # the template's top-left pixel in the padded d
-            # LANES independent partial sums: one chain of dependent adds would wait out each add's latency
-            part = ti.Vector([0.0] * LANES, dt=ti.f32)
-            for i in range((self.t_count[z - 1] + LANES - 1) // LANES):
-                for u in ti.static(range(LANES)):
-                    j = i * LANES + u
-                    part[u] += self.t_val[z - 1, j] * self.d[corner + self.t_off[z - 1, j]]
-            lam = part.sum()
+            key = self.d_index(p // self.n, r + hh, c + hw) * self.k + z - 1
+        return key
+
+    @ti.func
+    def lambda_memo(self, p: ti.i32, keys: ti.template(), lams: ti.template()):
+        """(key, λ) of prop[p] (:meth:`lambda_key`, Eq. 15), λ taken from the run's small cache (``keys``, ``lams``:
+        MEMO entries, direct-mapped by a hash of the key) when an earlier slot of the run had the same key, else
+        computed and cached: the particles of a frame crowd a few dozen (centroid, aspect) pairs around the target
+        (they move ~0.06 px a frame), so most sums are repeats (the same sum, the same bits)."""
+        key = self.lambda_key(p)
+        lam = ti.f32(0.0)
+        if key >= 0:
+            e = ti.cast((ti.cast(key, ti.u32) * ti.u32(2654435761)) >> ti.u32(32 - MEMO_BITS), ti.i32)
+            if keys[e] == key:
+                lam = lams[e]
+            else:
+                lam = self.template_sum(key // self.k, key % self.k)
+                keys[e], lams[e] = key, lam
+        return key, lam
+
+    @ti.func
+    def template_sum(self, corner: ti.i32, a: ti.i32) -> ti.f32:
+        """λ (Eq. 15): Σ a_kl(z)·d over aspect a + 1's non-zero pixels, the template's top-left pixel at the padded
+        d's flat index ``corner`` (no bounds checks: pixels off the image read the zero border)."""
+        # LANES independent partial sums: one chain of dependent adds would wait out each add's latency
+        part = ti.Vector([0.0] * LANES, dt=ti.f32)
+        for i in range((self.t_count[a] + LANES - 1) // LANES):
+            for u in ti.static(range(LANES)):
+                j = i * LANES + u
+                part[u] += self.t_val[a, j] * self.d[corner + self.t_off[a, j]]
+        return part.sum()
+
+    @ti.func
+    def log_ratio(self, p: ti.i32, key: ti.i32, lam: ti.f32) -> ti.f32:
+        """(2λ − ρ)/(2σ_c²) for prop[p] with :meth:`lambda_memo`'s (key, λ), 0 if key < 0 (absent or off the
+        extended grid) (Eqs. 10, 12, 15), plus the birth correction blw[p] (0 unless the particle entered from the
+        data-driven proposal).  ρ = E₀ − 2β_h·C_h − 2β_v·C_v from the border-aware tables (Eq. 12)."""
+        hh, hw = ti.static(self.halves)
+        out = ti.f32(0.0)
+        if key >= 0:
+            g, z = p // self.n, self.prop_z[p]
+            c = ti.cast(ti.floor(self.prop[p, 0] + 0.5), ti.i32)
+            r = ti.cast(ti.floor(self.prop[p, 2] + 0.5), ti.i32)
             e0 = self.energy[0, z - 1, r + hh, c + hw]
             rho = e0 - 2.0 * self.gpar[g, 0] * self.energy[1, z - 1, r + hh, c + hw] \
                 - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]

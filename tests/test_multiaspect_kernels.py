@@ -112,6 +112,33 @@ def test_likelihood_is_the_exact_gaussian_ratio_at_interior_edge_and_corner(rng,
     assert ll[5] == 0.0 and ll[6] == 0.0 and ll[7] == 0.0
 
 
+def test_cached_template_sums_are_bit_identical_in_any_slot_order(rng):
+    """The kernels reuse λ (Eq. 15) within a run of slots (kernels.multiaspect.lambda_memo): particles crowded on
+    a few (centroid, aspect) pairs, as after resampling, give the same bits whatever the order (hits, misses and
+    cache collisions differ), and agree with the twin, which sums every particle."""
+    shape, groups, n = (21, 26), 2, 1500
+    pools = make_pools(shape, random_templates(rng, k=4), groups=groups, n=n)
+    load(pools, rng, shape)
+    c = groups * n
+    cells = np.stack([rng.integers(-3, shape[1] + 3, 60), rng.integers(-3, shape[0] + 3, 60)], axis=1)
+    pick = rng.integers(0, len(cells), c)
+    state = np.zeros((c, 4), np.float32)
+    state[:, 0] = cells[pick, 0] + rng.uniform(-0.49, 0.49, c)
+    state[:, 2] = cells[pick, 1] + rng.uniform(-0.49, 0.49, c)
+    z = rng.integers(0, 5, c).astype(np.int32)  # some absent
+    state[::97, 0] = -50.0  # some off the extended grid
+    perm = np.concatenate([g * n + rng.permutation(n) for g in range(groups)])  # within each group
+    lls = []
+    for k, order in ((pools[0], np.arange(c)), (pools[0], perm), (pools[1], np.arange(c))):
+        k.put("prop", state[order])
+        k.put("prop_z", z[order])
+        k.likelihood()
+        lls.append(k.get("prop_ll")[np.argsort(order)])
+    np.testing.assert_array_equal(lls[0], lls[1])
+    np.testing.assert_allclose(lls[0], lls[2], rtol=1e-5, atol=1e-4)
+    assert np.count_nonzero(lls[0]) > c // 2
+
+
 def test_every_step_agrees_with_the_twin(rng):
     shape = (15, 19)
     pools = make_pools(shape, random_templates(rng), groups=3, n=700)
