@@ -33,7 +33,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erf
 
 from .errors import ParameterError
 from .motion_models import DIM, MODELS, transition
@@ -129,6 +128,8 @@ def pixel_integrated(shape, x: float, y: float, intensity: float, psf_sigma: flo
     c0, c1, r0, r1 = max(cx - r, 0), min(cx + r + 1, w), max(cy - r, 0), min(cy + r + 1, h)
     if c0 >= c1 or r0 >= r1:
         return slice(0, 0), slice(0, 0), np.zeros((0, 0))
+    from scipy.special import erf  # imported here: listing the methods does not pay for scipy.special
+
     s = math.sqrt(2.0) * psf_sigma
     cols, rows = np.arange(c0, c1), np.arange(r0, r1)
     fx = 0.5 * (erf((cols + 0.5 - x) / s) - erf((cols - 0.5 - x) / s))

@@ -7,8 +7,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.cluster.vq import kmeans2
-from scipy.special import chdtri  # χ² quantiles (scipy.stats.chi2.ppf calls the same)
 
 from ...kernels.phd import EST_COV, EST_MASS, EST_MEAN, EST_PEAK, EST_PROB
 from ...motion_models import DIM, X, Y
@@ -105,6 +103,8 @@ def captures(det: dict, n_hat: float, n_models: int, merge_distance: float, radi
 def k_means_labels(pos: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
     """k-means (k-means++ start) class labels of the points ``pos`` with at most ``k`` classes, and no more than
     the distinct points (more would leave k-means++ nothing to draw from); a class emptied on the way is dropped."""
+    from scipy.cluster.vq import kmeans2  # imported here: 0.1 s that a run of another method does not pay
+
     k = min(k, len(np.unique(pos, axis=0)))
     if k < 2:
         return np.zeros(len(pos), int)
@@ -164,5 +164,7 @@ def gated(capture: Capture, dims, probability: float) -> np.ndarray:
         m = np.einsum("pi,ij,pj->p", d, np.linalg.inv(cov), d)
     except np.linalg.LinAlgError:
         return np.ones(len(d), bool)
+    from scipy.special import chdtri  # χ² quantiles (scipy.stats.chi2.ppf calls the same)
+
     keep = m <= chdtri(len(dims), 1.0 - probability)
     return keep if keep.any() else np.ones(len(d), bool)

@@ -6,7 +6,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import ndtr, ndtri  # Φ and Φ⁻¹ (scipy.stats, 0.7 s to import, calls the same)
 
 from ...errors import ParameterError
 from ...long2012 import intensity_for_db
@@ -172,6 +171,9 @@ def derived(p: MMPHDParams) -> Derived:
     n = len(models)
     switch = parse_matrix(p.switch or default_switch(n), "switch (Π)", n, n)
     birth = parse_matrix(p.birth_models or default_birth_models(n), "birth_models (β)", n, 1)[0]
+    # Φ and Φ⁻¹ (scipy.stats, 0.7 s to import, calls the same); imported here, not by listing the methods
+    from scipy.special import ndtr, ndtri
+
     th = p.threshold if p.threshold is not None else 10 ** (p.snr_db / 20.0) - ndtri(P_DETECT)
     i_min = p.i_min if p.i_min is not None else 0.8 * intensity_for_db(p.snr_db, p.psf_sigma)
     i_max = p.i_max if p.i_max is not None else 1.2 * intensity_for_db(p.snr_db + 3.0, p.psf_sigma)
