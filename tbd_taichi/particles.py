@@ -131,9 +131,10 @@ class ParticlePool:
         if engine == "taichi":
             from .launch import Launcher
 
-            self.k = Launcher(backend.reusable(self, (Kernels.__name__,) + dims, lambda: Kernels(*dims)))
+            fields = backend.reusable(self, (Kernels.__name__,) + dims, lambda: Kernels(*dims))
+            self.k, fresh = Launcher(fields), not backend.holds_old_values(fields)
         else:
-            self.k = Kernels(*dims)
+            self.k, fresh = Kernels(*dims), False
         self.counts = np.zeros(self.n_groups, np.int32)
         self.k.set_counts(self.counts)
         self._no_seq = np.zeros(1, np.int32)  # step's Seq output when none is read
@@ -142,15 +143,18 @@ class ParticlePool:
         self.buf = 0
         self.params = {name: np.zeros(self.n_groups, np.float32) for name in GROUP_PARAMS}
         self.kinds = np.zeros(self.n_groups, np.int32)
-        backend.from_host_many(self.k, {  # one kernel on the Taichi engine
+        # the pool's set-up, written by one kernel on the Taichi engine; configure_groups writes the same fields
+        # again (the group parameters are these very arrays), so that one compiled kernel serves both
+        self._setup = {
             "slot_group": np.repeat(np.arange(self.n_groups, dtype=np.int32), caps), "off": self.off,
             "cap": self.caps, "tile_group": tile_group, "tile_start": np.array([t[1] for t in tiles], np.int32),
             "gt0": gt0, "gt1": gt1,
-            "best_e": np.zeros(self.n_groups, np.float32),  # largest E = 1 log-weight per group, from weigh
             # C_* (f64 here: the Taichi field rounds to f32 as a scalar argument would, the NumPy twin keeps them)
             "constants": np.array([q1, q2, intensity_floor, psf_sigma, noise_sigma], np.float64),
-            "seed_key": np.array([self.seed], np.uint32), **self.params, "kind": self.kinds})
-        backend.zero_many(self.k, ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born"))  # reused fields
+            "seed_key": np.array([self.seed], np.uint32), **self.params, "kind": self.kinds}
+        backend.from_host_many(self.k, self._setup)
+        if not fresh:  # reused fields (new Taichi fields are zeros); best_e: each group's largest E = 1 log-weight
+            backend.zero_many(self.k, ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born", "best_e"))
         self.set_proposal_map({})
 
     @staticmethod
@@ -195,7 +199,7 @@ class ParticlePool:
         for name, value in values.items():
             self.params[name][groups] = value
         self.kinds[groups] = BIRTH_KINDS[kind]
-        backend.from_host_many(self.k, {**{name: self.params[name] for name in values}, "kind": self.kinds})
+        backend.from_host_many(self.k, self._setup)  # self.params and self.kinds are its arrays
 
     def set_proposal_map(self, per_group: dict, labels: np.ndarray | None = None) -> None:
         """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64.

@@ -226,7 +226,8 @@ class TaichiSaliencyEngine:
         backend.from_host_many(f, {"valid": valid, "d": d, "row_base": grid.row_base, "col_block": grid.col_block,
                                    "block_offset": grid.offsets})
         f.block_max.fill(ks.NEG_INF)
-        backend.zero_many(f, ("proposal", "n_written", "memory"))
+        if backend.holds_old_values(f):  # new fields are zeros
+            backend.zero_many(f, ("proposal", "n_written", "memory"))
         self.host_lanes = np.zeros((self.shape[0], self.n_lanes * ks.LANES), np.float32)  # padding lanes stay 0
         self.host_proposal = None  # the last emitted frame's proposal, until proposal_copy hands it over
 

@@ -183,3 +183,41 @@ def test_batch_writes_to_numpy_and_other_fields():
     target.f = ti.field(ti.f32, 4)
     with pytest.raises(ValueError, match=r"f: array of shape \(5,\)"):
         backend.from_host_many(target, {"f": np.zeros(5)})
+
+
+def test_new_fields_are_zeros_and_reused_sets_say_so():
+    """The set-up skips zeroing new fields (backend.holds_old_values): Taichi must zero-fill every new field,
+    also after other fields were written and their memory freed; a reused set is reported as holding values."""
+    import gc
+
+    backend.init("cpu")
+
+    class Owner:
+        pass
+
+    class Fields:
+        def __init__(self):
+            self.all = (ti.field(ti.f32, 5000), ti.field(ti.i32, (70, 90)))
+
+    make = Fields
+
+    first = Owner()
+    fields = backend.reusable(first, ("zero-test", 5000), make)
+    assert not backend.holds_old_values(fields)
+    for f in fields.all:
+        f.fill(7)
+    fb = ti.FieldsBuilder()
+    tmp = ti.field(ti.f64)
+    fb.dense(ti.i, 20000).place(tmp)
+    tree = fb.finalize()
+    tmp.fill(-3.5)
+    tree.destroy()
+    for _ in range(3):
+        fresh = make()
+        assert all(not np.any(f.to_numpy()) for f in fresh.all)
+    del first
+    gc.collect()
+    second = Owner()
+    again = backend.reusable(second, ("zero-test", 5000), make)
+    assert again is fields and backend.holds_old_values(again)
+    assert again.all[0].to_numpy().max() == 7
