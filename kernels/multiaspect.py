@@ -8,17 +8,17 @@ holds resampled indices, ``anc`` each particle's ancestor in ``prev``.
 
 Steps (the paper's equations):
 
-* :meth:`MultiaspectKernels.dmap`: d = A·y, the 5-point stencil of Eq. 16 with zero boundary, per group;
+* :meth:`MultiaspectKernels.load`: d = A·y, the 5-point stencil of Eq. 16 with zero boundary, per group;
 * :meth:`MultiaspectKernels.propagate`: (z, s) ~ Eq. 2 (aspect by G, Eq. 1; exit with 1 − P_in, Eq. 6 in closed
   form; entry with p_a, uniform aspect, s ~ f₀, Eq. 5) and Eq. 4's white-noise acceleration, from ``prev[p]`` or
-  from the ancestor ``prev[anc[p]]``;
-* :meth:`MultiaspectKernels.likelihood`: ℓ = (2λ − ρ)/(2σ_c²) (Eq. 10 over the absent hypothesis), λ by Eq. 15,
+  from the ancestor ``prev[anc[p]]``, with each draw's ℓ and, for the resample-move filter, its MH move;
+* :meth:`MultiaspectKernels.likelihood`: ℓ = (2λ − ρ)/(2σ_c²) (Eq. 10 over the absent hypothesis), λ by Eq. 15
+  (summed once per (centroid, aspect) in a run of slots, :meth:`MultiaspectKernels.lambda_memo`),
   ρ = E₀ − 2β_h·C_h − 2β_v·C_v from the border-aware tables (Eq. 12), 0 for z = 0 or off the extended grid;
-* :meth:`MultiaspectKernels.weigh` / :meth:`draw` / :meth:`gather`: weights ∝ e^ℓ (Eqs. 18, 23) or the second
-  stage's ∝ e^(ℓ − ℓ̂) (Eq. 24), cumulated per group in f64, multinomial draws by binary search, the gather;
-* :meth:`MultiaspectKernels.mh_move`: the resample-move step (Eqs. 19–21);
-* :meth:`MultiaspectKernels.summarize`: per group, the absent count, the present particles' sums and each
-  aspect's count (§3.4).
+* ``kernels.multiaspect_resampling`` (a mixin): ``resample``, weights ∝ e^ℓ (Eqs. 18, 23) or the second stage's
+  ∝ e^(ℓ − ℓ̂) (Eq. 24), cumulated per group in f64, multinomial draws, the gather; ``metropolis_hastings``, the
+  resample-move acceptance (Eqs. 19–21); ``summarize``, per group the absent count, the present particles' sums
+  and each aspect's count (§3.4).
 
 Sums within a group run serially in one thread (groups in parallel), so results do not depend on the thread
 count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
@@ -28,23 +28,21 @@ import taichi as ti
 
 from .loops import thread_span
 from .phd import ERF_END, SQRT_HALF, ErfTable, erf
-from .rng import ExponentialTables, NormalTables, exponential_at, key_prefix, normals_at, uniform_at, uniform_f64_at
+from .multiaspect_resampling import S_DRAW, STATE, SUM_ABSENT, SUM_ASPECT, SUM_VX, SUM_VY, SUM_X, SUM_Y  # noqa: F401
+from .multiaspect_resampling import MultiaspectResampling
+from .rng import ExponentialTables, NormalTables, key_prefix, normals_at, uniform_at, uniform_f64_at
 
-STATE = 4  # x, ẋ, y, ẏ
 S_EXIT, S_ASPECT, S_ENTER, S_NOISE = 0, 1, 2, 3  # streams; S_NOISE…S_NOISE+3: the four motion normals
 S_F0 = 7  # f₀'s draws: x, y (uniform), ẋ, ẏ (normal and uniform parts): streams 7…12
 S_BIRTH_CELL = 13  # a data-driven birth's cell
 STAGE_STREAMS = 16  # propagate's stage s uses streams STAGE_BASE + 16·s + …
 STAGE_BASE = 1000
-S_DRAW = 100  # multinomial draws: stream S_DRAW + the draw's number in the frame
 S_MOVE = 200  # the MH acceptance uniforms: S_MOVE + the propagation stage (≤ 100)
 S_PRIOR = 400  # the initial draw: 400…407
 LAW = ("x0", "x1", "y0", "y1", "v_mean", "v_sd", "v_spread")  # f₀ and the prior: U[x0, x1] × U[y0, y1], velocity
 # per axis v_mean + v_sd·n + v_spread·(2u − 1)
 GPAR = ("beta_h", "beta_v", "sigma_c2")
 N_LAW, N_GPAR = len(LAW), len(GPAR)
-SUM_ABSENT, SUM_X, SUM_VX, SUM_Y, SUM_VY, SUM_ASPECT = 0, 1, 2, 3, 4, 5  # columns of summarize's output; aspects
-# from SUM_ASPECT
 _NP = {ti.f32: np.float32, ti.i32: np.int32, ti.f64: np.float64}
 
 LANES = 4  # partial sums of λ (Eq. 15) kept apart
@@ -75,7 +73,7 @@ def template_pixels(templates: np.ndarray, support: int, row_length: int) -> tup
 
 
 @ti.data_oriented
-class MultiaspectKernels:
+class MultiaspectKernels(MultiaspectResampling):
     """Fields of ``groups`` filters of ``n`` particles for frames of ``shape`` and the (K, h, w) templates."""
 
     def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
@@ -399,125 +397,6 @@ class MultiaspectKernels:
                 - 2.0 * self.gpar[g, 1] * self.energy[2, z - 1, r + hh, c + hw]
             out = (2.0 * lam - rho) / (2.0 * self.gpar[g, 2])
         return out + self.blw[p]
-
-    # ------------------------------------------------------------------ Eqs. 18, 23, 24: weights and resampling
-
-    @ti.kernel
-    def resample(self, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32, final: ti.i32,
-                 side: ti.i32):
-        """Multinomial resampling of each group, in one thread per group (slot order, f64):
-
-        * weights: cdf = cumulative e^(v − max v) (terms in f32, the sum in f64) with v = prop_ll (Eqs. 18, 23)
-          or, for the APF's second stage,
-          prop_ll − cur_ll (Eq. 24: cur_ll holds the first stage's ℓ̂ of the particle's auxiliary index);
-          total[g] = its last value;
-        * draws: N sorted U(0, 1) as the normalised partial sums of N + 1 Exp(1) variates (the order statistics of
-          N uniforms), merged with cdf: pick[j] = the first slot whose cdf exceeds U_(j)·total (a multinomial
-          sample, in slot order);
-        * gather: cur[j] ← prop[pick[j]] with its ℓ and anc[j] ← pick[j] (the ancestor in prev); ``final`` (the
-          APF's post-sampling selection): prev[j] on the side other than ``side`` ← prop[pick[j]] instead."""
-        span = ti.static(self.span)
-        ti.loop_config(serialize=self.serial_groups)
-        for it in range(self.groups * span):
-            if it % span == 0:
-                self.resample_group(it // span, seed, frame, number, second_stage, final, 1 - side)
-
-    @ti.func
-    def resample_group(self, g: ti.i32, seed: ti.u32, frame: ti.i32, number: ti.i32, second_stage: ti.i32,
-                       final: ti.i32, out_side: ti.i32):
-        """:meth:`resample` for group g, in this thread."""
-        a, b = g * self.n, (g + 1) * self.n
-        m = ti.f32(-3.0e38)
-        for p in range(a, b):
-            m = ti.max(m, self.log_weight(p, second_stage))
-        cum = ti.f64(0.0)
-        for p in range(a, b):
-            cum += ti.cast(ti.exp(self.log_weight(p, second_stage) - m), ti.f64)  # terms f32, the sum f64
-            self.cdf[p] = cum
-        self.total[g] = cum
-        key = key_prefix(seed, frame, S_DRAW + number)
-        span = ti.f64(0.0)
-        for j in range(a, b):
-            span += exponential_at(self.exp_tables.w, self.exp_tables.k, self.exp_tables.f, key, j)
-            self.spacing[j] = span
-        span += exponential_at(self.exp_tables.w, self.exp_tables.k, self.exp_tables.f, key, b)
-        scale = cum / span
-        src = a
-        for j in range(a, b):
-            target = self.spacing[j] * scale
-            while src < b - 1 and self.cdf[src] <= target:
-                src += 1
-            self.pick[j] = src
-            if final != 0:
-                self.keep(j, src, out_side)
-            else:
-                for d in ti.static(range(STATE)):
-                    self.cur[j, d] = self.prop[src, d]
-                self.cur_z[j] = self.prop_z[src]
-                self.cur_ll[j] = self.prop_ll[src]
-                self.anc[j] = src
-
-    @ti.func
-    def log_weight(self, p: ti.i32, second_stage: ti.i32) -> ti.f32:
-        return self.prop_ll[p] - self.cur_ll[p] if second_stage != 0 else self.prop_ll[p]
-
-    @ti.func
-    def keep(self, j: ti.i32, i: ti.i32, side: ti.i32):
-        """prev[j] on side ``side`` ← prop[i]."""
-        o = j + side * self.capacity
-        for d in ti.static(range(STATE)):
-            self.prev[o, d] = self.prop[i, d]
-        self.prev_z[o] = self.prop_z[i]
-
-    # ------------------------------------------------------------------ Eqs. 19–21
-
-    @ti.func
-    def metropolis_hastings(self, j: ti.i32, u: ti.f32, final: ti.i32, side: ti.i32):
-        """Accept prop[j] (drawn from the prior at the ancestor's n − 1 state) for cur[j] if u ≤ e^(ℓ̃ − ℓ) (Eq. 19),
-        else keep cur[j] (Eqs. 20–21); ``final``: the outcome goes to prev[j] on side ``side`` instead."""
-        accept = ti.log(u) <= self.prop_ll[j] - self.cur_ll[j]
-        if final != 0:
-            if accept:
-                self.keep(j, j, side)
-            else:
-                o = j + side * self.capacity
-                for d in ti.static(range(STATE)):
-                    self.prev[o, d] = self.cur[j, d]
-                self.prev_z[o] = self.cur_z[j]
-        elif accept:
-            for d in ti.static(range(STATE)):
-                self.cur[j, d] = self.prop[j, d]
-            self.cur_z[j] = self.prop_z[j]
-            self.cur_ll[j] = self.prop_ll[j]
-
-    # ------------------------------------------------------------------ §3.4
-
-    @ti.kernel
-    def summarize(self, out: ti.types.ndarray(dtype=ti.f64, ndim=2), side: ti.i32):
-        """out[g] = (absent count, Σx, Σẋ, Σy, Σẏ over present particles, count of each aspect) of prev's side
-        ``side``, per group in one thread (f64, slot order)."""
-        span = ti.static(self.span)
-        ti.loop_config(serialize=self.serial_groups)
-        for it in range(self.groups * span):
-            if it % span == 0:
-                g = it // span
-                absent = ti.f64(0.0)
-                sums = ti.Vector([0.0] * STATE, dt=ti.f64)
-                counts = ti.Vector([0.0] * self.k, dt=ti.f64)
-                for p in range(g * self.n + side * self.capacity, (g + 1) * self.n + side * self.capacity):
-                    z = self.prev_z[p]
-                    if z == 0:
-                        absent += 1.0
-                    else:
-                        sums += ti.Vector([self.prev[p, d] for d in ti.static(range(STATE))], dt=ti.f64)
-                        for a in ti.static(range(self.k)):
-                            if z == a + 1:
-                                counts[a] += 1.0
-                out[g, SUM_ABSENT] = absent
-                for d in ti.static(range(STATE)):
-                    out[g, SUM_X + d] = sums[d]
-                for a in ti.static(range(self.k)):
-                    out[g, SUM_ASPECT + a] = counts[a]
 
     # ------------------------------------------------------------------ host transfers
 
