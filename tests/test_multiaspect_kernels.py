@@ -113,7 +113,7 @@ def test_likelihood_is_the_exact_gaussian_ratio_at_interior_edge_and_corner(rng,
 
 
 def test_cached_template_sums_are_bit_identical_in_any_slot_order(rng):
-    """The kernels reuse λ (Eq. 15) within a run of slots (kernels.multiaspect.lambda_memo): particles crowded on
+    """The kernels reuse ℓ (Eqs. 10, 15) within a run of slots (kernels.multiaspect.log_ratio): particles crowded on
     a few (centroid, aspect) pairs, as after resampling, give the same bits whatever the order (hits, misses and
     cache collisions differ), and agree with the twin, which sums every particle."""
     shape, groups, n = (21, 26), 2, 1500
