@@ -14,10 +14,10 @@ Steps (Eq. numbers of the paper):
 * :meth:`PhdKernels.likelihood`: the most influenced cell (Eq. 17) and the log-likelihood ratio over the
   window |i − i0| ≤ ⌊3Σ⌋ (Eqs. 13, 18) of the pixel-integrated PSF (Eq. 4, closed form with :func:`erf`);
 * :meth:`PhdKernels.update`: Ψ per (group, cell) (Eqs. 15–16), w̃ = ℓw/(λ + Ψ) (Eq. 14), n̂ = Σ w̃ (Eq. 19)
-  and the cumulative resampling weights, ∝ ℓ (Eq. 24) or ∝ w̃;
+  and the cumulative resampling weights, ∝ ℓ (Eq. 24) or ∝ w̃ (with the class estimates in the same launch);
 * :meth:`PhdKernels.estimate`: each group's w̃-weighted mean, covariance and model probabilities (Eqs. 20, 35);
 * :meth:`PhdKernels.resample`: systematic resampling of each group to its L_g particles of weight n̂_g/L_g
-  (Eqs. 20, 24), written compacted to new segments;
+  (Eqs. 20, 24), written compacted to new segments of the second buffer, the next propagate's input;
 * :meth:`PhdKernels.mask`: Eq. 36's detector frame, I_0 over the windows of the tracked targets.
 
 Sums within a group run serially in one thread (groups in parallel), so results do not depend on the thread
@@ -44,6 +44,7 @@ SHIFT_MAX, RATIO_CAP = 80.0, 70.0
 S_SWITCH, S_NOISE = 0, 1  # streams: model switch; the 7 process-noise normals are streams 1…7
 S_CELL, S_X, S_Y, S_VX, S_VY, S_I, S_MODEL = 8, 9, 10, 11, 12, 13, 14  # birth draws
 S_RESAMPLE = 15
+BIRTH_WIDTH = 6  # the birth field: survival e, V_max, I_min, I_max, newborn weight γ/J, intensity floor
 RESAMPLE_CHUNK = 64  # outputs per thread's walk in resample
 # (row, column) of the entries of F, F⁻¹ (F_SUPPORT) and L (L_SUPPORT) that can be non-zero in any of the models
 # cv, c-ct, ac-ct, ca of tbd_taichi.motion_models (checked there by tests/test_mm_phd_kernels.py): the propagation
@@ -121,6 +122,7 @@ class PhdKernels:
         self.F, self.F_inv, self.L = (ti.field(ti.f32, (MAX_MODELS, DIM, DIM)) for _ in range(3))
         # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
         self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
+        self.birth = ti.field(ti.f32, BIRTH_WIDTH)  # (e, V_max, I_min, I_max, γ/J, I_floor): propagate's
         self.tables, self.erf_table = NormalTables.shared(), ErfTable.shared()
         self.span = thread_span(serial)
 
@@ -128,12 +130,14 @@ class PhdKernels:
 
     @ti.kernel
     def propagate(self, seed: ti.u32, frame_key: ti.u32, total: ti.i32, backward: ti.i32, n_cells: ti.i32,
-                  first_birth: ti.i32, n_births: ti.i32, birth: ti.types.vector(6, ti.f32)):
-        """Slots [0, total): survivors switch model and move (``backward`` ≠ 0: by F⁻¹, Eq. 26), w ← e·w; the
+                  first_birth: ti.i32, n_births: ti.i32):
+        """Slots [0, total): survivors, read from the second buffer (the resampled pool, :meth:`resample` and
+        :meth:`load`), switch model and move (``backward`` ≠ 0: by F⁻¹, Eq. 26), w ← e·w, into the first; the
         newborn slots [first_birth, first_birth + n_births) join group 0 (the detector) and draw Eqs. 28–30's
-        births over ``cells[0:n_cells]``.  ``birth`` = (e, V_max, I_min, I_max,
+        births over ``cells[0:n_cells]``.  The ``birth`` field holds (e, V_max, I_min, I_max,
         γ/J, I_floor); V_max in px/s; a survivor's intensity is kept ≥ I_floor."""
-        survive, vmax, i_min, i_max, w_birth, i_floor = birth[0], birth[1], birth[2], birth[3], birth[4], birth[5]
+        survive, vmax, i_min, i_max = self.birth[0], self.birth[1], self.birth[2], self.birth[3]
+        w_birth, i_floor = self.birth[4], self.birth[5]
         k_switch = key_prefix(seed, frame_key, S_SWITCH)
         keys = [key_prefix(seed, frame_key, S_NOISE + d) for d in ti.static(range(DIM))]
         kb = [key_prefix(seed, frame_key, s) for s in ti.static(range(S_CELL, S_MODEL + 1))]
@@ -151,11 +155,12 @@ class PhdKernels:
                 self.model[p] = self.draw(BETA_ROW, uniform_at(kb[6], p))
                 self.weight[p] = w_birth
             else:
-                g = self.group[p]
-                r = self.draw(self.model[p], uniform_at(k_switch, p))
+                g = self.group2[p]
+                self.group[p] = g
+                r = self.draw(self.model2[p], uniform_at(k_switch, p))
                 self.model[p] = r
                 n = normals_at(self.tables.w, self.tables.k, self.tables.phi, keys, p)
-                x = ti.Vector([self.state[p, d] for d in ti.static(range(DIM))], dt=ti.f32)
+                x = ti.Vector([self.state2[p, d] for d in ti.static(range(DIM))], dt=ti.f32)
                 fx = ti.Vector([0.0] * DIM, dt=ti.f32)
                 if backward != 0:  # a statement, not a conditional expression: only one product is computed
                     fx = self.transition(self.F_inv, r, x)
@@ -166,7 +171,7 @@ class PhdKernels:
                 for i in ti.static(range(DIM)):
                     acc = fx[i] + s * ln[i]
                     self.state[p, i] = ti.max(acc, i_floor) if i == 4 else acc
-                self.weight[p] *= survive
+                self.weight[p] = self.weight2[p] * survive
 
     @ti.func
     def transition(self, matrices: ti.template(), r: ti.i32, v, support: ti.template() = F_SUPPORT):
@@ -189,22 +194,36 @@ class PhdKernels:
     # ------------------------------------------------------------------ likelihood (Eqs. 4, 13, 17, 18)
 
     @ti.kernel
-    def likelihood(self, first: ti.i32, count: ti.i32, half: ti.template(), psf_sigma: ti.f32):
-        """Slots [first, first + count): the most influenced cell (row·W + col of the pixel holding (x, y), Eq. 17;
-        −1 outside the image) and log ℓ = Σ_window h(z − h/2) (Eq. 13 with σ_n = 1 on the normalised frame) over
-        |col − col0|, |row − row0| ≤ ``half`` = ⌊3Σ⌋ (Eq. 18), pixels outside the image left out; h is Eq. 4's
-        pixel integral, h = I·fx·fy (:meth:`fractions`)."""
-        h, w = ti.static(self.shape)
+    def likelihood(self, first: ti.i32, count: ti.i32, half: ti.template(), psf_sigma: ti.f32,
+                   masked: ti.template()):
+        """Slots [first, first + count), weighed on the masked frame (``masked`` = 1) or the raw one (0): the most
+        influenced cell (row·W + col of the pixel holding (x, y), Eq. 17; −1 outside the image) and log ℓ =
+        Σ_window h(z − h/2) (Eq. 13 with σ_n = 1 on the normalised frame) over |col − col0|, |row − row0| ≤
+        ``half`` = ⌊3Σ⌋ (Eq. 18), pixels outside the image left out; h is Eq. 4's pixel integral, h = I·fx·fy
+        (:meth:`fractions`)."""
         scale = ti.f32(SQRT_HALF) / psf_sigma
         for p in range(first, first + count):
-            x, y, inten = self.state[p, 0], self.state[p, 2], self.state[p, 4]
-            col = ti.cast(ti.floor(x + 0.5), ti.i32)
-            row = ti.cast(ti.floor(y + 0.5), ti.i32)
-            src = self.gint[self.group[p], FRAME]
-            if 0 <= col < w and 0 <= row < h:
-                fx = self.fractions(col, x, scale, half)
-                fy = self.fractions(row, y, scale, half)
-                acc = ti.f32(0.0)
+            if ti.static(masked == 1):
+                self.weigh_particle(p, self.masked, half, scale)
+            else:
+                self.weigh_particle(p, self.raw, half, scale)
+
+    @ti.func
+    def weigh_particle(self, p: ti.i32, frame: ti.template(), half: ti.template(), scale: ti.f32):
+        """:meth:`likelihood` of slot p on ``frame``; windows clear of the border skip the per-pixel checks."""
+        h, w = ti.static(self.shape)
+        x, y, inten = self.state[p, 0], self.state[p, 2], self.state[p, 4]
+        col = ti.cast(ti.floor(x + 0.5), ti.i32)
+        row = ti.cast(ti.floor(y + 0.5), ti.i32)
+        if 0 <= col < w and 0 <= row < h:
+            fx = self.fractions(col, x, scale, half)
+            fy = self.fractions(row, y, scale, half)
+            acc = ti.f32(0.0)
+            if half <= col < w - half and half <= row < h - half:
+                for a, b in ti.static(ti.ndrange(2 * half + 1, 2 * half + 1)):
+                    hv = inten * fx[b] * fy[a]
+                    acc += hv * (frame[row + a - half, col + b - half] - 0.5 * hv)
+            else:
                 for a in ti.static(range(2 * half + 1)):
                     r = row + a - half
                     if 0 <= r < h:
@@ -212,13 +231,12 @@ class PhdKernels:
                             c = col + b - half
                             if 0 <= c < w:
                                 hv = inten * fx[b] * fy[a]
-                                zv = self.masked[r, c] if src == 1 else self.raw[r, c]
-                                acc += hv * (zv - 0.5 * hv)
-                self.cell[p] = row * w + col
-                self.loglik[p] = acc
-            else:
-                self.cell[p] = -1
-                self.loglik[p] = LOG_ZERO
+                                acc += hv * (frame[r, c] - 0.5 * hv)
+            self.cell[p] = row * w + col
+            self.loglik[p] = acc
+        else:
+            self.cell[p] = -1
+            self.loglik[p] = LOG_ZERO
 
     @ti.func
     def fractions(self, centre: ti.i32, pos: ti.f32, scale: ti.f32, half: ti.template()):
@@ -233,7 +251,7 @@ class PhdKernels:
 
     @ti.kernel
     def update(self, first_group: ti.i32, n_groups: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32,
-               miss: ti.f32):
+               miss: ti.f32, radius: ti.f32):
         """Groups [first_group, first_group + n_groups), each in one thread.  The measurements are the cells of
         the group's frame with z ≥ ``th`` (§5.1's pre-segmentation; λ = 1 − Φ(Th) is their false-alarm rate).
         With s = min(the group's largest log ℓ, log λ + SHIFT_MAX) and ℓ' = e^(min(log ℓ − s, RATIO_CAP)):
@@ -242,11 +260,15 @@ class PhdKernels:
         (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
         its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell and top its largest value.  Ψ is
-        cleared afterwards."""
+        cleared afterwards.  ``radius`` > 0: then each group's class estimate (:meth:`estimate`), in the same
+        thread."""
         span = ti.static(self.span)
         for it in range(n_groups * span):
             if it % span == 0:
-                self.update_group(first_group + it // span, lam, on_likelihood, th, miss)
+                g = first_group + it // span
+                self.update_group(g, lam, on_likelihood, th, miss)
+                if radius > 0.0:
+                    self.estimate_group(g, radius)
 
     @ti.func
     def update_group(self, g: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32, miss: ti.f32):
@@ -258,22 +280,26 @@ class PhdKernels:
             m = ti.max(m, self.loglik[p])
         m = ti.min(m, ti.log(lam) + SHIFT_MAX)
         src = self.gint[g, FRAME]
-        for p in range(a, b):
+        for p in range(a, b):  # ℓ' kept in cdf until the next pass overwrites it
             if self.measured(self.cell[p], src, th, w):
-                self.psi[g, self.cell[p]] += self.weight[p] * self.scaled_ratio(p, m)
+                lk = self.scaled_ratio(p, m)
+                self.cdf[p] = lk
+                self.psi[g, self.cell[p]] += self.weight[p] * lk
+            elif self.cell[p] >= 0 and on_likelihood != 0:
+                self.cdf[p] = self.scaled_ratio(p, m)
         lam_m = lam * ti.exp(ti.min(-m, 80.0))
         n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
         for p in range(a, b):
             wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
             if self.measured(self.cell[p], src, th, w):
-                lk = self.scaled_ratio(p, m)
+                lk = self.cdf[p]
                 psi = self.psi[g, self.cell[p]]
                 mass = psi / (lam_m + psi)
                 wt = self.weight[p] * lk / (lam_m + psi)
                 rho = lk if on_likelihood != 0 else wt
             elif self.cell[p] >= 0:
                 wt = miss * self.weight[p]
-                rho = miss * self.scaled_ratio(p, m) if on_likelihood != 0 else wt
+                rho = miss * self.cdf[p] if on_likelihood != 0 else wt
             self.wtilde[p] = wt
             self.cellmass[p] = mass
             top = ti.max(top, mass)
@@ -404,32 +430,21 @@ class PhdKernels:
                 self.weight2[o] = self.gflt[g, OUT_WEIGHT]
                 self.group2[o] = self.gint[g, OUT_ID]
 
-    @ti.kernel
-    def commit(self, total: ti.i32):
-        """Slots [0, total) of the second buffer become the pool."""
-        for p in range(total):
-            for d in ti.static(range(DIM)):
-                self.state[p, d] = self.state2[p, d]
-            self.model[p] = self.model2[p]
-            self.weight[p] = self.weight2[p]
-            self.group[p] = self.group2[p]
-
     # ------------------------------------------------------------------ mask (Eq. 36)
 
     @ti.kernel
-    def mask(self, centres: ti.types.ndarray(dtype=ti.f32, ndim=2), half: ti.i32, value: ti.f32):
-        """masked = raw with ``value`` (I_0) over the (2·half + 1)² window around the pixel of each row (x, y) of
-        ``centres`` (Eq. 36)."""
+    def mask(self, first_group: ti.i32, n_groups: ti.i32, half: ti.i32, value: ti.f32):
+        """masked = raw with ``value`` (I_0) over the (2·half + 1)² window around the pixel of the estimated
+        position (est's x, y) of each group in [first_group, first_group + n_groups) (Eq. 36)."""
         h, w = ti.static(self.shape)
         for r, c in ti.ndrange(h, w):
             self.masked[r, c] = self.raw[r, c]
-        for t, a, b in ti.ndrange(centres.shape[0], 2 * half + 1, 2 * half + 1):
-            r = ti.cast(ti.floor(centres[t, 1] + 0.5), ti.i32) + a - half
-            c = ti.cast(ti.floor(centres[t, 0] + 0.5), ti.i32) + b - half
+        for t, a, b in ti.ndrange(n_groups, 2 * half + 1, 2 * half + 1):
+            g = first_group + t
+            r = ti.cast(ti.floor(self.est[g, EST_MEAN + 2] + 0.5), ti.i32) + a - half
+            c = ti.cast(ti.floor(self.est[g, EST_MEAN] + 0.5), ti.i32) + b - half
             if 0 <= r < h and 0 <= c < w:
                 self.masked[r, c] = value
-
-
 
     # ------------------------------------------------------------------ host transfers
 
@@ -465,10 +480,11 @@ class PhdKernels:
     @ti.kernel
     def load(self, offset: ti.i32, state: ti.types.ndarray(dtype=ti.f32, ndim=2),
              model: ti.types.ndarray(dtype=ti.i32, ndim=1), weight: ti.f32, group: ti.i32):
-        """Slots [offset, offset + n) ← the n rows of ``state`` and ``model``, weight ``weight``, group ``group``."""
+        """Slots [offset, offset + n) of the second buffer (the next :meth:`propagate`'s input) ← the n rows of
+        ``state`` and ``model``, weight ``weight``, group ``group``."""
         for p in range(state.shape[0]):
             for d in ti.static(range(DIM)):
-                self.state[offset + p, d] = state[p, d]
-            self.model[offset + p] = model[p]
-            self.weight[offset + p] = weight
-            self.group[offset + p] = group
+                self.state2[offset + p, d] = state[p, d]
+            self.model2[offset + p] = model[p]
+            self.weight2[offset + p] = weight
+            self.group2[offset + p] = group

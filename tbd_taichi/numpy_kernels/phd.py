@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.phd import (BETA_ROW, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB,
+from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB,
                            EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            RATIO_CAP, SHIFT_MAX,
@@ -49,6 +49,7 @@ class PhdKernels:
         self.cells = np.zeros(h * w, np.int32)
         self.F, self.F_inv, self.L = (np.zeros((MAX_MODELS, DIM, DIM), F32) for _ in range(3))
         self.model_cdf = np.zeros((MAX_MODELS + 1, MAX_MODELS), F32)
+        self.birth = np.zeros(BIRTH_WIDTH, F32)
 
     def put(self, name: str, values) -> None:
         """Array ``name`` ← ``values`` (its whole shape)."""
@@ -70,9 +71,10 @@ class PhdKernels:
         return np.minimum((u[:, None] >= self.model_cdf[rows]).sum(axis=1), MAX_MODELS - 1).astype(np.int32)
 
     def propagate(self, seed: int, frame_key: int, total: int, backward: int, n_cells: int, first_birth: int,
-                  n_births: int, birth) -> None:
-        """Survivors switch and move (Eqs. 1, 26, 31–34), births drawn (Eqs. 28–30); see the kernel."""
-        survive, vmax, i_min, i_max, w_birth, i_floor = (F32(v) for v in birth)
+                  n_births: int) -> None:
+        """Survivors switch and move from the second buffer into the first (Eqs. 1, 26, 31–34), births drawn
+        (Eqs. 28–30); see the kernel."""
+        survive, vmax, i_min, i_max, w_birth, i_floor = self.birth
         p = np.arange(total)
         born = (p >= first_birth) & (p < first_birth + n_births)
         b, s = p[born], p[~born]
@@ -91,18 +93,19 @@ class PhdKernels:
             self.model[b] = self._draw(np.full(b.size, BETA_ROW), u[S_MODEL])
             self.weight[b] = w_birth
         if s.size:
-            r = self._draw(self.model[s], uniform(seed, frame_key, S_SWITCH, s))
-            self.model[s] = r
+            r = self._draw(self.model2[s], uniform(seed, frame_key, S_SWITCH, s))
+            self.model[s], self.group[s] = r, self.group2[s]
             n = np.stack([normal(seed, frame_key, S_NOISE + d, s) for d in range(DIM)], axis=1)
             F = (self.F_inv if backward else self.F)[r]
             scale = np.sqrt(self.gflt[self.group[s], QSCALE])[:, None]
-            moved = np.einsum("pij,pj->pi", F, self.state[s]) + scale * np.einsum("pij,pj->pi", self.L[r], n)
+            moved = np.einsum("pij,pj->pi", F, self.state2[s]) + scale * np.einsum("pij,pj->pi", self.L[r], n)
             moved[:, 4] = np.maximum(moved[:, 4], i_floor)
             self.state[s] = moved.astype(F32)
-            self.weight[s] *= survive
+            self.weight[s] = self.weight2[s] * survive
 
-    def likelihood(self, first: int, count: int, half: int, psf_sigma: float) -> None:
-        """Eq. 17's cell and Eq. 13's log ℓ over Eq. 18's window of Eq. 4's pixel integrals; see the kernel."""
+    def likelihood(self, first: int, count: int, half: int, psf_sigma: float, masked: int) -> None:
+        """Eq. 17's cell and Eq. 13's log ℓ over Eq. 18's window of Eq. 4's pixel integrals on the masked
+        (``masked`` = 1) or the raw frame; see the kernel."""
         h, w = self.shape
         sl = slice(first, first + count)
         x, y, inten = self.state[sl, 0], self.state[sl, 2], self.state[sl, 4]
@@ -114,17 +117,17 @@ class PhdKernels:
         scale = F32(SQRT_HALF) / F32(psf_sigma)
         fx = pixel_fraction(cols.astype(F32), x[:, None], scale) * ((cols >= 0) & (cols < w))
         fy = pixel_fraction(rows.astype(F32), y[:, None], scale) * ((rows >= 0) & (rows < h))
-        frames = np.stack([self.raw, self.masked])
-        src = self.gint[self.group[sl], FRAME]
-        z = frames[src[:, None, None], np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
+        frame = self.masked if masked == 1 else self.raw
+        z = frame[np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
         hv = inten[:, None, None] * fy[:, :, None] * fx[:, None, :]
         acc = (hv * (z - F32(0.5) * hv)).sum(axis=(1, 2), dtype=F32)
         self.cell[sl] = np.where(inside, row * w + col, -1)
         self.loglik[sl] = np.where(inside, acc, F32(LOG_ZERO))
 
     def update(self, first_group: int, n_groups: int, lam: float, on_likelihood: int, th: float,
-               miss: float) -> None:
-        """Eqs. 14–16, 19, 24 per group over the measurement cells z ≥ th; see the kernel."""
+               miss: float, radius: float) -> None:
+        """Eqs. 14–16, 19, 24 per group over the measurement cells z ≥ th, and with ``radius`` > 0 the class
+        estimates (:meth:`estimate`); see the kernel."""
         frames = (self.raw.ravel(), self.masked.ravel())
         for g in range(first_group, first_group + n_groups):
             a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
@@ -146,6 +149,8 @@ class PhdKernels:
             self.gout[g, N_HAT] = self.wtilde[a:b].sum(dtype=F32)
             self.gout[g, TOTAL] = self.cdf[b - 1] if b > a else 0.0
             self.gout[g, TOP] = self.cellmass[a:b].max(initial=0.0)
+        if radius > 0:
+            self.estimate(first_group, n_groups, radius)
 
     def estimate(self, first_group: int, n_groups: int, radius: float) -> None:
         """Each group's class around the cell of largest PHD mass inside its gate: mass, weighted mean,
@@ -196,23 +201,19 @@ class PhdKernels:
             self.state2[o], self.model2[o] = self.state[src], self.model[src]
             self.weight2[o], self.group2[o] = self.gflt[g, OUT_WEIGHT], self.gint[g, OUT_ID]
 
-    def commit(self, total: int) -> None:
-        """Slots [0, total) of the second buffer become the pool."""
-        for a, b in ((self.state, self.state2), (self.model, self.model2), (self.weight, self.weight2),
-                     (self.group, self.group2)):
-            a[:total] = b[:total]
-
-    def mask(self, centres: np.ndarray, half: int, value: float) -> None:
-        """masked = raw with ``value`` over the windows around ``centres`` (Eq. 36)."""
+    def mask(self, first_group: int, n_groups: int, half: int, value: float) -> None:
+        """masked = raw with ``value`` over the windows around the groups' estimated positions (Eq. 36)."""
         h, w = self.shape
         self.masked[...] = self.raw
-        for x, y in np.asarray(centres, F32).reshape(-1, 2):
+        est = self.est[first_group:first_group + n_groups]
+        for x, y in zip(est[:, EST_MEAN], est[:, EST_MEAN + 2]):
             r, c = int(np.floor(y + F32(0.5))), int(np.floor(x + F32(0.5)))
             self.masked[max(r - half, 0):max(min(r + half + 1, h), 0), max(c - half, 0):max(min(c + half + 1, w), 0)] \
                 = value
 
     def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
-        """Slots [offset, offset + n) ← ``state`` rows and ``model``, weight ``weight``, group ``group``."""
+        """Slots [offset, offset + n) of the second buffer ← ``state`` rows and ``model``, weight ``weight``,
+        group ``group``."""
         n = len(state)
-        self.state[offset:offset + n], self.model[offset:offset + n] = state, model
-        self.weight[offset:offset + n], self.group[offset:offset + n] = weight, group
+        self.state2[offset:offset + n], self.model2[offset:offset + n] = state, model
+        self.weight2[offset:offset + n], self.group2[offset:offset + n] = weight, group

@@ -39,8 +39,8 @@ class BackwardRecursion:
             sd = np.sqrt(max(cov[VX, VX], cov[VY, VY], 0.0))
             pool.layout([n], [0], [1.0], [mean[[X, Y]] - mean[[VX, VY]] * T], [r0 + p.gate_sigmas * sd * T])
             pool.propagate(key, n, 0, backward=True)  # Eqs. 26–27
-            pool.weigh(0, 1)
-            e = unpack(pool.estimates(0, 1)[0], len(self.d.models))
+            pool.weigh(0, 1, estimate=True)
+            e = unpack(pool.estimates()[0], len(self.d.models))
             if e.peak >= p.confirm_above:
                 drops = 0
                 mean, cov = e.mean, e.cov

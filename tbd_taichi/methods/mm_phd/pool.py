@@ -69,7 +69,7 @@ class PhdPool:
         self.gflt = np.zeros((max_groups, len(GROUP_FLOAT)), np.float32)
         self.n_groups = 0
         self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
-        self.no_centre = np.full((1, 2), -1.0e6, np.float32)
+        self.birth_sent = None  # the birth parameters in the kernels' field
 
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,
@@ -107,36 +107,42 @@ class PhdPool:
     def propagate(self, frame_key: int, total: int, n_cells: int, births: int = 0, backward: bool = False) -> None:
         """Eqs. 1, 26, 28–34 over slots [0, total); the detector's last ``births`` slots are newborn."""
         first = int(self.gint[0, START] + self.gint[0, LENGTH]) - births
-        self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), first, births, self.birth)
+        if self.birth_sent is None or not np.array_equal(self.birth_sent, self.birth):
+            backend.from_host(self.k.birth, self.birth)
+            self.birth_sent = self.birth.copy()
+        self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), first, births)
 
     def weigh(self, first_group: int, n_groups: int, on_likelihood: bool | None = None,
-              segmented: bool = False) -> None:
-        """Eqs. 4, 13–19 for groups [first_group, first_group + n_groups) (their slots are consecutive), with
-        the resampling weights ∝ ℓ (Eq. 24) or ∝ w̃ (``on_likelihood``; None: the likelihood_resampling
-        parameter); ``segmented``: only cells with z ≥ Th are measurements (§5.1's pre-segmentation, a particle
-        elsewhere keeps (1 − p_d)·w), else every cell is."""
+              segmented: bool = False, estimate: bool = False) -> None:
+        """Eqs. 4, 13–19 for groups [first_group, first_group + n_groups) (their slots are consecutive, their
+        frame the same), with the resampling weights ∝ ℓ (Eq. 24) or ∝ w̃ (``on_likelihood``; None: the
+        likelihood_resampling parameter); ``segmented``: only cells with z ≥ Th are measurements (§5.1's
+        pre-segmentation, a particle elsewhere keeps (1 − p_d)·w), else every cell is; ``estimate``: then the
+        groups' class estimates (Eqs. 20, 35; :meth:`estimates` reads them)."""
         if n_groups <= 0:
             return
         a = int(self.gint[first_group, START])
         last = first_group + n_groups - 1
         count = int(self.gint[last, START] + self.gint[last, LENGTH]) - a
+        frames = self.gint[first_group:last + 1, FRAME]
+        if np.any(frames != frames[0]):
+            raise ValueError("PhdPool.weigh: the groups weighed together must share one frame")
         if count > 0:
-            self.k.likelihood(a, count, self.d.half, self.p.psf_sigma)
+            self.k.likelihood(a, count, self.d.half, self.p.psf_sigma, int(frames[0]))
         lik = self.p.likelihood_resampling if on_likelihood is None else on_likelihood
         th = self.d.threshold if segmented else -EVERY_CELL
-        self.k.update(first_group, n_groups, self.d.lam, int(lik), th, 1.0 - P_DETECT)
+        self.k.update(first_group, n_groups, self.d.lam, int(lik), th, 1.0 - P_DETECT,
+                      self.d.class_radius if estimate else 0.0)
 
-    def estimates(self, first_group: int, n_groups: int) -> np.ndarray:
-        """Eqs. 20, 35 for the groups; returns the kernels' ``est`` table (all groups)."""
-        if n_groups > 0:
-            self.k.estimate(first_group, n_groups, self.d.class_radius)
+    def estimates(self) -> np.ndarray:
+        """The kernels' ``est`` table (all groups): the class estimates of the last :meth:`weigh` with
+        ``estimate``."""
         return backend.to_host(self.k.est)
 
-    def mask(self, centres: np.ndarray) -> None:
-        """Eq. 36: the detector's frame with I_0 over the windows around ``centres`` (x, y rows), ⌊3Σ⌋ +
-        mask_margin px each side."""
-        c = np.asarray(centres, np.float32).reshape(-1, 2)
-        self.k.mask(c if len(c) else self.no_centre, self.d.half + self.p.mask_margin, self.p.mask_value)
+    def mask(self, first_group: int, n_groups: int) -> None:
+        """Eq. 36: the detector's frame with I_0 over the windows around the estimated positions of groups
+        [first_group, first_group + n_groups), ⌊3Σ⌋ + mask_margin px each side."""
+        self.k.mask(first_group, n_groups, self.d.half + self.p.mask_margin, self.p.mask_value)
 
     def n_hat(self) -> tuple[np.ndarray, np.ndarray]:
         """n̂ of each group of the layout (Eq. 19) and the largest PHD mass Ψ/(λ + Ψ) of one of its cells."""
@@ -157,15 +163,13 @@ class PhdPool:
         backend.from_host(self.k.gint, g)
         backend.from_host(self.k.gflt, self.gflt)
         self.k.resample(self.seed, frame_key, n, int(max(lens.max(initial=0), 1)))
-        total = int(lens.sum()) + (room if n > 0 else 0)
-        self.k.commit(total)
-        return total
+        return int(lens.sum()) + (room if n > 0 else 0)
 
     def particles(self, start: int, count: int) -> dict:
         """Slots [start, start + count) on the host: state (count, 7), model, w̃ and cell mass."""
         return self.k.slots(start, count)
 
     def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
-        """Slots [offset, offset + n) ← the particles ``state``, ``model`` of weight ``weight`` in ``group``."""
+        """Slots [offset, offset + n) of the next frame's pool ← the particles ``state``, ``model`` of weight ``weight`` in ``group``."""
         self.k.load(offset, np.ascontiguousarray(state, np.float32), np.ascontiguousarray(model, np.int32),
                     float(weight), int(group))

@@ -204,12 +204,11 @@ class MMPHDTracker(OneSequence):
         radii = [r0] + [r0 + self.p.gate_sigmas * t.velocity_sd * T for t in self.targets]
         total = pool.layout(lengths, [1] + [0] * n_tr, [1.0] + [t.scale for t in self.targets], centres, radii)
         pool.propagate(k, total, n_cells, births)
-        pool.weigh(1, n_tr)
-        est = pool.estimates(1, n_tr)
-        pool.mask(est[1:1 + n_tr, [X, Y]])
+        pool.weigh(1, n_tr, estimate=True)
+        pool.mask(1, n_tr)
         pool.weigh(0, 1, on_likelihood=self.p.detector_resampling == "likelihood", segmented=True)
         n_hat, self.det_top = pool.n_hat()
-        return n_hat, est
+        return n_hat, pool.estimates()
 
     def _bookkeeping(self, k: int, n_hat: np.ndarray, est: np.ndarray) -> list[tuple]:
         """Each tracker's frame: tracked (n̂ ≥ drop_below) or dropped, confirmation (then the backward
