@@ -216,7 +216,7 @@ def peak_rss_mib() -> float:
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
               frontend_process: bool = False, runs: int = 1, paired: bool = False, method: str = "sgds",
-              settings=None) -> dict:
+              settings=None, threads: int | None = None) -> dict:
     """Benchmark every engine on the same simulated sequence; returns the JSON-ready result.
     ``method``: the registered method whose tracker is timed (``pipeline``).
     ``frontend_process``: the trackers run normalisation and saliency in a second process.  ``runs`` > 1
@@ -226,7 +226,8 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     ``paired``: in each run the engines take the frames in turn, frame by frame (their trackers side by side in
     memory), so that even a short slow spell falls on both.  On the CPU backend each engine also reports the
     median time in kernel launches and outside them (``kernels_ms``, ``host_ms``).  ``settings``: the method's
-    parameters over its bench keywords (``--param``); the frames are the method's ``bench_frames`` if it has them."""
+    parameters over its bench keywords (``--param``); the frames are the method's ``bench_frames`` if it has them.
+    ``threads``: the CPU backend's worker threads (None: every core)."""
     if runs < 1:
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
     from . import methods
@@ -234,10 +235,11 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
     spec = methods.get(method)  # an unknown method fails here
     scene = {"snr": snr, "motion": "transit", **spec.bench_scene}
     backend.keep_freed_memory()
-    cfg = backend.init(arch)
+    cfg = backend.init(arch, threads=threads)
     frames = spec.bench_frames(tuple(shape), n_frames + WARMUP, seed) if spec.bench_frames else \
         simulate(tuple(shape), frames=n_frames + WARMUP, seed=seed, **scene).frames
     result = {"method": method, "shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
+              "threads": backend.cpu_threads() if cfg.arch == "cpu" else None,
               "particles": particles, "groups": groups, "pipeline": pipeline,
               "frontend_process": bool(frontend_process and pipeline), "runs": runs, "paired": bool(paired),
               "settings": dict(settings or {}),
@@ -272,7 +274,8 @@ def format_table(result: dict) -> str:
     front += f", {result['runs']} runs each" if result.get("runs", 1) > 1 else ""
     front += ", engines frame by frame in turn" if result.get("paired") and len(names) > 1 else ""
     lines = [f"{result.get('method', 'sgds')}: shape {result['shape'][0]}x{result['shape'][1]} (HxW), SNR preset {result['snr']}, "
-             f"{result['frames']} timed frames{pool}, arch {result['arch']}{front}",
+             f"{result['frames']} timed frames{pool}, arch {result['arch']}"
+             + (f", {result['threads']} thread(s)" if result.get("threads") else "") + front,
              f"on {result.get('machine', 'an unrecorded machine')}", head]
     split = ["kernels", "host"] if all("kernels_ms" in engines[n] for n in names) else []
     for stage in stages + ["update"] + split + ["fps", "peak MiB"]:

@@ -89,7 +89,7 @@ def cmd_bench(args) -> int:
     result = run_bench(args.shape, snr=args.snr, n_frames=args.frames, engines=args.checked, arch=args.arch,
                        particles=args.particles, groups=args.groups, pipeline=not args.no_pipeline,
                        frontend_process=args.frontend_process, runs=args.runs, paired=args.paired,
-                       method=args.method, settings=args.settings)
+                       method=args.method, settings=args.settings, threads=args.threads)
     print(json.dumps(result) if args.json else format_table(result))
     return 0
 

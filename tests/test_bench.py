@@ -67,6 +67,21 @@ def test_paired_runs_give_the_engines_each_frame_in_turn(monkeypatch):
     assert calls == ["taichi"] * n + ["numpy"] * n + ["numpy"] * n + ["taichi"] * n
 
 
+def test_threads_reach_the_benchmarks_backend(monkeypatch):
+    """--threads: the benchmark's CPU backend runs that many worker threads (it used to start its own with every
+    core), and the result and its table say how many."""
+    from tbd_taichi import backend
+
+    monkeypatch.setattr(bench, "pipeline_stepper", lambda *a, **k: (lambda frame: {"normalise": 1e-3}, lambda: None))
+    try:
+        result = run_bench((32, 32), snr=3.0, n_frames=2, threads=1)
+        assert result["threads"] == 1 == backend.cpu_threads()
+        assert ", 1 thread(s)" in format_table(result).splitlines()[0]
+    finally:
+        backend.init("cpu")
+    assert run_bench((32, 32), snr=3.0, n_frames=2)["threads"] == backend.cpu_threads()
+
+
 @pytest.mark.slow
 def test_cpu_results_split_update_into_kernel_launches_and_host_work():
     """kernels_ms: the median time in kernel launches (none for the NumPy engine), kernel_ms per kernel; host_ms:
