@@ -495,6 +495,35 @@ def test_min_peak_z_reports_only_tracks_that_bright():
         SGDSPF((50, 50), min_peak_z=-1.0)
 
 
+def test_keep_peak_z_holds_a_proven_track_through_a_faint_stretch():
+    """min_peak_z 16 with keep_peak_z 12 after 5 reported frames: a track at peak z 20 is reported once its running
+    peak (from 0, weight 0.1) passes 16; when the peak falls to 13, the proven track stays reported while a track
+    reported in fewer frames is cut at 16 as before; below 12 both are cut.  keep_peak_z 0 is the plain gate."""
+    from tbd_taichi.methods.sgds.confirmation import Track
+
+    def reported(keep_after: int, keep: float, peaks) -> list[bool]:
+        tracker = SGDSPF((20, 20), min_peak_z=16.0, keep_peak_z=keep, keep_after=keep_after)
+        t, out = Track(1, 0, confirmed=True, path=deque([(0, 10.0, 10.0, 0, 0, 1, 1)])), []
+        for f, peak in enumerate(peaks):
+            z = np.zeros((20, 20), np.float32)
+            z[10, 10] = peak
+            t.path.append((f, 10.0, 10.0, 0, 0, 1, 1))
+            out.append(tracker._reportable(t, z))
+        return out
+
+    bright, faint, dark = [20.0] * 30, [13.0] * 15, [5.0] * 10
+    first = 16  # 20·(1 − 0.9^(f + 1)) ≥ 16 from f = 15 on
+    proven = reported(5, 12.0, bright + faint + dark)
+    assert not any(proven[:first - 1]) and all(proven[first:30])
+    assert all(proven[30:30 + 8]) and not any(proven[-5:])  # the running peak falls from ≈ 19.3 to 13, then below 12
+    plain = reported(5, 0.0, bright + faint + dark)
+    assert plain[:30] == proven[:30] and not all(plain[30:38])  # the plain gate cuts it as it falls below 16
+    unproven = reported(100, 12.0, bright + faint + dark)  # never reported in 100 frames: the plain gate
+    assert unproven == plain
+    with pytest.raises(tbd.ParameterError, match="keep_peak_z"):
+        SGDSPF((20, 20), keep_peak_z=-1.0)
+
+
 def test_near_any_of_agrees_with_near_any_point_by_point(rng):
     """The vectorised duplicate test gives near_any's answer at every position, with points exactly at,
     just inside and just outside the radius, and for no points or no positions."""

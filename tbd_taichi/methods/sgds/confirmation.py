@@ -31,6 +31,7 @@ class Track:
     peak_z: float = 0.0  # running mean (from 0) of the frame's largest z within 1 px of the estimate
     reported: bool = False  # confirmed and its peak z has reached min_peak_z
     reported_span: tuple | None = None  # (first, last) frame it was reported in
+    reported_frames: int = 0  # frames it was reported in
     path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
     log_ratios: deque = field(default_factory=deque)  # ln(MTW/MSW) of the last icef_window frames
     held: deque = field(default_factory=deque)  # (ln(MTW/MSW), SCEF = 1.1) of the last confirm_window frames

@@ -84,6 +84,11 @@ class SGDSParams:
                             low=1)
     min_peak_z: float = param(0.0, doc="report a confirmed track only while its running peak z is at least this "
                               "(0: off, as in the paper)", unit="σ", source="not in the paper", low=0)
+    keep_peak_z: float = param(0.0, doc="a track reported in keep_after frames stays reported while its running "
+                               "peak z is at least this (0: min_peak_z throughout)", unit="σ",
+                               source="not in the paper", low=0)
+    keep_after: int = param(0, doc="frames a track must have been reported in before keep_peak_z applies",
+                            unit="frames", source="not in the paper", low=0)
     icef_window: int = param(10, doc="ICEF = 1 also when MTW/MSW's geometric mean over this many frames is ≥ "
                              "icef_mean_ratio (1: Eq. 40 as printed)", unit="frames", source="not in the paper",
                              low=1)

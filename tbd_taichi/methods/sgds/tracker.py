@@ -362,14 +362,18 @@ class SGDSPF(OneSequence):
         """Confirmed, and (with min_peak_z > 0) its running peak z at least min_peak_z: a real-video
         guard against confirmed clutter, which is fainter in z than the targets (docs/results/drone_ir.md).
         The running mean starts at 0, so a track must stay bright for about ten frames; short-lived
-        transients are not reported."""
+        transients are not reported.  A track reported in ``keep_after`` frames needs only ``keep_peak_z``
+        (with keep_peak_z > 0): hysteresis, so that a proven target is not cut where it fades for a while."""
         if self.p.min_peak_z <= 0:
             t.reported = t.reported or t.confirmed
             return t.confirmed
         t.peak_z = running_peak_z(t.peak_z, z, *t.last_xy())
-        ok = t.confirmed and t.peak_z >= self.p.min_peak_z
+        proven = t.reported and t.reported_frames >= self.p.keep_after and self.p.keep_peak_z > 0
+        keep = self.p.keep_peak_z if proven else self.p.min_peak_z
+        ok = t.confirmed and t.peak_z >= keep
         t.reported = t.reported or ok
         if ok:
+            t.reported_frames += 1
             frame = t.path[-1][0]
             t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
         return ok
