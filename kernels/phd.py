@@ -14,8 +14,9 @@ Steps (Eq. numbers of the paper):
 * :meth:`PhdKernels.likelihood`: the most influenced cell (Eq. 17) and the log-likelihood ratio over the
   window |i − i0| ≤ ⌊3Σ⌋ (Eqs. 13, 18) of the pixel-integrated PSF (Eq. 4, closed form with :func:`erf`);
 * :meth:`PhdKernels.update`: Ψ per (group, cell) (Eqs. 15–16), w̃ = ℓw/(λ + Ψ) (Eq. 14), n̂ = Σ w̃ (Eq. 19)
-  and the cumulative resampling weights, ∝ ℓ (Eq. 24) or ∝ w̃ (with the class estimates in the same launch);
-* :meth:`PhdKernels.estimate`: each group's w̃-weighted mean, covariance and model probabilities (Eqs. 20, 35);
+  and the cumulative resampling weights, ∝ ℓ (Eq. 24) or ∝ w̃, and on request each group's class estimate in
+  the same launch (:meth:`PhdKernels.estimate_group`: w̃-weighted mean, covariance and model probabilities,
+  Eqs. 20, 35);
 * :meth:`PhdKernels.resample`: systematic resampling of each group to its L_g particles of weight n̂_g/L_g
   (Eqs. 20, 24), written compacted to new segments of the second buffer, the next propagate's input;
 * :meth:`PhdKernels.mask`: Eq. 36's detector frame, I_0 over the windows of the tracked targets.
@@ -260,8 +261,8 @@ class PhdKernels:
         (1 − p_d, a missed detection) for a particle whose cell is no measurement; n̂ = Σ w̃ (Eq. 19), cdf =
         cumulative ℓ' (Eq. 24, ×``miss`` off the measurements; ``on_likelihood`` = 0: cumulative w̃) and total =
         its last value; cellmass = the PHD mass Ψ/(λ + Ψ) of the particle's cell and top its largest value.  Ψ is
-        cleared afterwards.  ``radius`` > 0: then each group's class estimate (:meth:`estimate`), in the same
-        thread."""
+        cleared afterwards.  ``radius`` > 0: then each group's class estimate (:meth:`estimate_group`), in the
+        same thread."""
         span = ti.static(self.span)
         for it in range(n_groups * span):
             if it % span == 0:
@@ -335,22 +336,14 @@ class PhdKernels:
 
     # ------------------------------------------------------------------ estimate (Eqs. 20, 35)
 
-    @ti.kernel
-    def estimate(self, first_group: ti.i32, n_groups: ti.i32, radius: ti.f32):
-        """Groups [first_group, first_group + n_groups), each in one thread: the target's class (§3.1) is the
-        particles within ``radius`` px (per axis) of the centre of the cell of largest PHD mass Ψ/(λ + Ψ) among
-        the group's particles inside its gate (within gflt's RADIUS of (CX, CY); every particle when CX is
+    @ti.func
+    def estimate_group(self, g: ti.i32, radius: ti.f32):
+        """Group g's class estimate, in this thread (:meth:`update` with ``radius`` > 0): the target's class (§3.1)
+        is the particles within ``radius`` px (per axis) of the centre of the cell of largest PHD mass Ψ/(λ + Ψ)
+        among the group's particles inside its gate (within gflt's RADIUS of (CX, CY); every particle when CX is
         NO_CENTRE).  Writes the class's mass Σw̃, its w̃-weighted mean and covariance and each model's w̃ share
         (Eq. 35's L_{k,r}/L_k in expectation over the resampling); a class with Σw̃ = 0 uses equal weights, an
         empty one gives mass 0 and a zero mean."""
-        span = ti.static(self.span)
-        for it in range(n_groups * span):
-            if it % span == 0:
-                self.estimate_group(first_group + it // span, radius)
-
-    @ti.func
-    def estimate_group(self, g: ti.i32, radius: ti.f32):
-        """:meth:`estimate` for group g, in this thread."""
         w = ti.static(self.shape[1])
         a, b = self.segment(g)
         gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]

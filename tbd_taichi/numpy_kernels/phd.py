@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS, EST_PEAK, EST_PROB,
-                           EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
+from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS,
+                           EST_PEAK, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
                            RATIO_CAP, SHIFT_MAX,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
@@ -127,7 +127,7 @@ class PhdKernels:
     def update(self, first_group: int, n_groups: int, lam: float, on_likelihood: int, th: float,
                miss: float, radius: float) -> None:
         """Eqs. 14–16, 19, 24 per group over the measurement cells z ≥ th, and with ``radius`` > 0 the class
-        estimates (:meth:`estimate`); see the kernel."""
+        estimates (:meth:`_estimate_groups`); see the kernel."""
         frames = (self.raw.ravel(), self.masked.ravel())
         for g in range(first_group, first_group + n_groups):
             a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
@@ -150,11 +150,11 @@ class PhdKernels:
             self.gout[g, TOTAL] = self.cdf[b - 1] if b > a else 0.0
             self.gout[g, TOP] = self.cellmass[a:b].max(initial=0.0)
         if radius > 0:
-            self.estimate(first_group, n_groups, radius)
+            self._estimate_groups(first_group, n_groups, radius)
 
-    def estimate(self, first_group: int, n_groups: int, radius: float) -> None:
+    def _estimate_groups(self, first_group: int, n_groups: int, radius: float) -> None:
         """Each group's class around the cell of largest PHD mass inside its gate: mass, weighted mean,
-        covariance and model shares (Eqs. 19, 20, 35); see the kernel."""
+        covariance and model shares (Eqs. 19, 20, 35); see the kernel's ``estimate_group``."""
         w = self.shape[1]
         for g in range(first_group, first_group + n_groups):
             a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]

@@ -69,7 +69,7 @@ class PhdPool:
         self.gflt = np.zeros((max_groups, len(GROUP_FLOAT)), np.float32)
         self.n_groups = 0
         self.birth = np.array([p.survival, p.vmax, *d.i_range, p.birth_mass / p.births, d.i_floor], np.float32)
-        self.birth_sent = None  # the birth parameters in the kernels' field
+        self.k.put("birth", self.birth)  # propagate's; set_frame changes the newborn weight γ/J
 
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,
@@ -78,7 +78,10 @@ class PhdPool:
         if not births:
             return 0
         cells = np.flatnonzero(z.ravel() >= self.d.threshold).astype(np.int32)
-        self.birth[4] = self.p.birth_mass / self.p.births if cells.size else 0.0
+        weight = np.float32(self.p.birth_mass / self.p.births if cells.size else 0.0)
+        if weight != self.birth[4]:
+            self.birth[4] = weight
+            backend.from_host(self.k.birth, self.birth)
         full = np.arange(z.size, dtype=np.int32)
         full[:cells.size] = cells
         backend.from_host(self.k.cells, full)
@@ -107,9 +110,6 @@ class PhdPool:
     def propagate(self, frame_key: int, total: int, n_cells: int, births: int = 0, backward: bool = False) -> None:
         """Eqs. 1, 26, 28–34 over slots [0, total); the detector's last ``births`` slots are newborn."""
         first = int(self.gint[0, START] + self.gint[0, LENGTH]) - births
-        if self.birth_sent is None or not np.array_equal(self.birth_sent, self.birth):
-            backend.from_host(self.k.birth, self.birth)
-            self.birth_sent = self.birth.copy()
         self.k.propagate(self.seed, frame_key, total, int(backward), max(n_cells, 1), first, births)
 
     def weigh(self, first_group: int, n_groups: int, on_likelihood: bool | None = None,
@@ -170,6 +170,7 @@ class PhdPool:
         return self.k.slots(start, count)
 
     def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
-        """Slots [offset, offset + n) of the next frame's pool ← the particles ``state``, ``model`` of weight ``weight`` in ``group``."""
+        """Slots [offset, offset + n) of the next frame's pool ← the particles ``state``, ``model`` of weight
+        ``weight`` in ``group``."""
         self.k.load(offset, np.ascontiguousarray(state, np.float32), np.ascontiguousarray(model, np.int32),
                     float(weight), int(group))
