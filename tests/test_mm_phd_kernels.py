@@ -41,7 +41,6 @@ def random_pool(pools, rng, shape, lengths, masked=(1, 0, 0, 0)):
     state[:, [1, 3]] = rng.normal(0, 1.5, (n, 2))
     state[:, 4] = rng.uniform(3, 15, n)
     model = rng.integers(0, 3, n).astype(np.int32)
-    group = np.repeat(np.arange(len(lengths)), lengths).astype(np.int32)
     gint = np.zeros((pools[0].max_groups, len(tk.GROUP_INT)), np.int32)
     gint[:len(lengths), tk.START] = np.concatenate([[0], np.cumsum(lengths)[:-1]])
     gint[:len(lengths), tk.LENGTH] = lengths

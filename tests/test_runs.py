@@ -27,7 +27,7 @@ def test_auto_picks_the_profile_by_the_input(kind, dtype, expected):
 
 def test_a_profile_gives_a_method_only_the_settings_it_declares():
     sgds, pf, tophat = tbd.methods.get("sgds"), tbd.methods.get("pf"), tbd.methods.get("tophat-pf")
-    assert profile_settings(sgds, "real-video") == {**REAL_VIDEO, "keep_peak_z": 12.0, "keep_after": 50}
+    assert profile_settings(sgds, "real-video") == {**REAL_VIDEO, "keep_peak_z": 12.0, "keep_after": 50, "still_frames": 50}
     assert profile_settings(pf, "real-video") == {**REAL_VIDEO, "min_peak_z": 10.0}  # its own level over the shared
     assert profile_settings(tophat, "real-video") == {}  # declares none of REAL_VIDEO's keys
     assert profile_settings(sgds, "paper") == {}

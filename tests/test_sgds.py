@@ -524,6 +524,43 @@ def test_keep_peak_z_holds_a_proven_track_through_a_faint_stretch():
         SGDSPF((20, 20), keep_peak_z=-1.0)
 
 
+def test_still_frames_keeps_a_still_track_that_goes_early_out_of_the_whole_paths():
+    """still_frames 30 (radius 3 px) under min_peak_z 16 at peak z 20 (reported from frame 15 on): a still track
+    joins the whole paths at its 30th reported frame, a track moving 0.25 px/frame once it is 3 px from where it
+    was first reported (frame 28), a still track where a track of the whole paths ended at once; online rows
+    are the same in every case, and still_frames 0 (the paper profile) puts every reported track in at once."""
+    from tbd_taichi.methods.sgds.confirmation import Track
+
+    def joins(still_frames: int, speed: float = 0.0, ended_at=None, frames: int = 60):
+        tracker = SGDSPF((40, 40), min_peak_z=16.0, still_frames=still_frames)
+        if ended_at is not None:
+            old = Track(1, 0, confirmed=True, reported=True, whole=True, path=deque([(0, *ended_at, 0, 0, 1, 1)]))
+            tracker.active.append(old)
+            tracker._end_track(old)
+        t, online, whole = Track(2, 1, confirmed=True, path=deque()), [], []
+        for f in range(frames):
+            x = 10.0 + speed * f
+            z = np.zeros((40, 40), np.float32)
+            z[10, int(round(x))] = 20.0
+            t.path.append((f, x, 10.0, speed, 0, 1, 1))
+            online.append(tracker._reportable(t, z))
+            whole.append(t.whole)
+        return online, whole
+
+    online, whole = joins(0)
+    first = online.index(True)
+    assert first == 15 and all(online[first:]) and whole == online
+    online30, whole30 = joins(30)
+    assert online30 == online and whole30.index(True) == first + 29 and all(whole30[first + 29:])
+    assert not any(joins(30, frames=first + 29)[1])  # gone after 29 reported frames: never in the whole paths
+    moving_online, moving = joins(30, speed=0.25)
+    assert moving_online == online and moving.index(True) == 28  # 0.25·(28 − 15) = 3.25 px > 3 px
+    assert joins(30, ended_at=(11.0, 12.0))[1].index(True) == first  # 2.2 px from a whole-path track's end
+    assert joins(30, ended_at=(14.0, 10.0))[1].index(True) == first + 29  # 4 px away: a new place
+    with pytest.raises(tbd.ParameterError, match="still_radius"):
+        SGDSPF((20, 20), still_radius=-1.0)
+
+
 def test_near_any_of_agrees_with_near_any_point_by_point(rng):
     """The vectorised duplicate test gives near_any's answer at every position, with points exactly at,
     just inside and just outside the radius, and for no points or no positions."""

@@ -13,6 +13,10 @@ from .tracker import MIN_FRAMES, PIPELINE_STAGES, SGDSPF
 # times the running peak z's settling time) stays reported down to a running peak z of 12 (the profile's gate,
 # REAL_VIDEO's min_peak_z, is 16): a target proven bright is not cut where it fades for a while
 REAL_VIDEO_KEEP_PEAK_Z, REAL_VIDEO_KEEP_AFTER = 12.0, 50
+# ... and whole paths take a track that stays within 3 px (still_radius's default) of where it was first reported
+# once it has been reported in 50 frames (a moving or re-found track at once): still hot spots that appear and go
+# within 8-37 frames stay out, still targets stay for hundreds (docs/methods/sgds.md#real-video)
+REAL_VIDEO_STILL_FRAMES = 50
 
 
 def sgds_params(shape, snr: float | None = None, **overrides) -> SGDSParams:
@@ -38,11 +42,13 @@ SPEC = MethodSpec(
     options=("background", "bad_pixels", "history", "frontend_process"),
     aliases={"snr": "snr", "min_peak_z": "min_peak_z"},
     rank=0, particle_count=sgds_particles,
-    real_video={"keep_peak_z": REAL_VIDEO_KEEP_PEAK_Z, "keep_after": REAL_VIDEO_KEEP_AFTER},
+    real_video={"keep_peak_z": REAL_VIDEO_KEEP_PEAK_Z, "keep_after": REAL_VIDEO_KEEP_AFTER,
+                "still_frames": REAL_VIDEO_STILL_FRAMES},
     assumes=("point targets, any number (Gaussian PSF, Σ = 0.7 px), nearly constant velocity ≤ 1 px/frame; peak "
              "SNR ≥ snr (1.4, the Table 2 preset); background: paper profile the frame's median, white Gaussian "
              "noise of σ from the MAD; real-video profile a spatiotemporal background and local σ, snr 5, tracks "
-             "reported while their peak z ≥ 16 (≥ 12 once reported for 50 frames)"),
+             "reported while their peak z ≥ 16 (≥ 12 once reported for 50 frames); whole paths take a still "
+             "track (within 3 px) once reported for 50 frames"),
 )
 
 __all__ = ["MIN_FRAMES", "PAPER_SALIENCY", "PIPELINE_STAGES", "SGDSPF", "SGDSParams", "SPEC"]

@@ -32,6 +32,8 @@ class Track:
     reported: bool = False  # confirmed and its peak z has reached min_peak_z
     reported_span: tuple | None = None  # (first, last) frame it was reported in
     reported_frames: int = 0  # frames it was reported in
+    first_reported_at: tuple | None = None  # (x, y) where it was first reported
+    whole: bool = False  # in the whole paths (reported, and not a still track that went before still_frames)
     path: deque = field(default_factory=deque)  # (frame, x, y, vx, vy, intensity, confidence)
     log_ratios: deque = field(default_factory=deque)  # ln(MTW/MSW) of the last icef_window frames
     held: deque = field(default_factory=deque)  # (ln(MTW/MSW), SCEF = 1.1) of the last confirm_window frames

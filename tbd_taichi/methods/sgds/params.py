@@ -89,6 +89,12 @@ class SGDSParams:
                                source="not in the paper", low=0)
     keep_after: int = param(0, doc="frames a track must have been reported in before keep_peak_z applies",
                             unit="frames", source="not in the paper", low=0)
+    still_frames: int = param(0, doc="whole paths: a track that stays within still_radius of where it was first "
+                              "reported joins them once reported in this many frames (0: at once)", unit="frames",
+                              source="not in the paper", low=0)
+    still_radius: float = param(3.0, doc="whole paths: a track that moves farther from where it was first reported, "
+                                "or begins this near where one of them ended, joins them at once", unit="px",
+                                source="not in the paper", low=0)
     icef_window: int = param(10, doc="ICEF = 1 also when MTW/MSW's geometric mean over this many frames is ≥ "
                              "icef_mean_ratio (1: Eq. 40 as printed)", unit="frames", source="not in the paper",
                              low=1)

@@ -112,6 +112,7 @@ class SGDSPF(OneSequence):
         self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
         self.active: list[Track] = []
         self.finished: list[Track] = []
+        self.whole_ends: list[tuple[float, float]] = []  # (x, y) where each track of the whole paths ended
         self.next_track_id = 1
         self.online_rows: list[tuple] = []
         self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
@@ -176,7 +177,7 @@ class SGDSPF(OneSequence):
             first, last = t.reported_span
             return (row for row in t.path if first <= row[0] <= last)
 
-        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.reported
+        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.whole
                 for (f, x, y, vx, vy, i, c) in kept(t)]
         return make_table(rows, TRACK_DTYPE)
 
@@ -365,7 +366,7 @@ class SGDSPF(OneSequence):
         transients are not reported.  A track reported in ``keep_after`` frames needs only ``keep_peak_z``
         (with keep_peak_z > 0): hysteresis, so that a proven target is not cut where it fades for a while."""
         if self.p.min_peak_z <= 0:
-            t.reported = t.reported or t.confirmed
+            t.reported = t.whole = t.reported or t.confirmed
             return t.confirmed
         t.peak_z = running_peak_z(t.peak_z, z, *t.last_xy())
         proven = t.reported and t.reported_frames >= self.p.keep_after and self.p.keep_peak_z > 0
@@ -376,7 +377,23 @@ class SGDSPF(OneSequence):
             t.reported_frames += 1
             frame = t.path[-1][0]
             t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
+            t.whole = t.whole or self._stayed_or_moved(t)
         return ok
+
+    def _stayed_or_moved(self, t: Track) -> bool:
+        """Whether a reported track goes into the whole paths (``still_frames`` > 0; not in the paper; online rows
+        are not held back): one that has stayed within ``still_radius`` px of where it was first reported does once
+        it has been reported in ``still_frames`` frames; one that moves farther, or that began within
+        ``still_radius`` of where a track of the whole paths ended (the target found again), at once.  Still hot
+        spots that appear and go in real video (IR_DRONE_142's for 29 and 37 frames) stay out; a still target that
+        stays is in, from its first reported frame (docs/methods/sgds.md#real-video)."""
+        x, y = t.last_xy()
+        t.first_reported_at = t.first_reported_at or (x, y)
+        if self.p.still_frames <= 0 or t.reported_frames >= self.p.still_frames:
+            return True
+        x0, y0 = t.first_reported_at
+        return math.hypot(x - x0, y - y0) > self.p.still_radius or any(
+            math.hypot(x0 - ex, y0 - ey) <= self.p.still_radius for ex, ey in self.whole_ends)
 
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
@@ -399,5 +416,7 @@ class SGDSPF(OneSequence):
         self.active.remove(t)
         self.free_groups.append(t.group)
         self.ended_groups.append(t.group)
+        if t.whole:
+            self.whole_ends.append(t.last_xy())
         if t.reported and self.history:
             self.finished.append(t)
