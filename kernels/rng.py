@@ -69,9 +69,19 @@ def exponential_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def table_field(values: np.ndarray, dtype):
     """A 1-D field holding ``values`` (after ``ti.init``)."""
-    field = ti.field(dtype, values.shape[0])
-    field.from_numpy(values)
-    return field
+    return table_fields((values, dtype))[0]
+
+
+def table_fields(*tables) -> tuple:
+    """1-D fields holding each (values, dtype) of ``tables``, filled by one kernel
+    (``transfer.arrays_to_fields``; ``from_numpy`` compiles one kernel per field)."""
+    from .transfer import arrays_to_fields
+
+    fields = tuple(ti.field(dtype, values.shape[0]) for values, dtype in tables)
+    sizes = [values.shape[0] for values, _ in tables]
+    offsets = tuple(int(v) for v in np.cumsum([0] + sizes[:-1]))
+    arrays_to_fields(np.concatenate([np.asarray(values, np.float64) for values, _ in tables]), fields, offsets)
+    return fields
 
 
 _SHARED: dict = {}  # tables class -> (the Taichi program they belong to, the instance)
@@ -104,7 +114,7 @@ class NormalTables(SharedTables):
 
     def __init__(self):
         w, k, phi = ziggurat_tables()
-        self.w, self.k, self.phi = table_field(w, ti.f32), table_field(k, ti.u32), table_field(phi, ti.f64)
+        self.w, self.k, self.phi = table_fields((w, ti.f32), (k, ti.u32), (phi, ti.f64))
 
 
 @ti.data_oriented
@@ -113,7 +123,7 @@ class ExponentialTables(SharedTables):
 
     def __init__(self):
         w, k, f = exponential_tables()
-        self.w, self.k, self.f = table_field(w, ti.f64), table_field(k, ti.u32), table_field(f, ti.f64)
+        self.w, self.k, self.f = table_fields((w, ti.f64), (k, ti.u32), (f, ti.f64))
 
 
 @ti.func
