@@ -534,7 +534,8 @@ def test_still_frames_keeps_a_still_track_that_goes_early_out_of_the_whole_paths
     def joins(still_frames: int, speed: float = 0.0, ended_at=None, frames: int = 60):
         tracker = SGDSPF((40, 40), min_peak_z=16.0, still_frames=still_frames)
         if ended_at is not None:
-            old = Track(1, 0, confirmed=True, reported=True, whole=True, path=deque([(0, *ended_at, 0, 0, 1, 1)]))
+            old = Track(1, 0, confirmed=True, reported=True, whole=True, reported_span=(0, 0),
+                        path=deque([(0, *ended_at, 0, 0, 1, 1)]))
             tracker.active.append(old)
             tracker._end_track(old)
         t, online, whole = Track(2, 1, confirmed=True, path=deque()), [], []
@@ -545,6 +546,9 @@ def test_still_frames_keeps_a_still_track_that_goes_early_out_of_the_whole_paths
             t.path.append((f, x, 10.0, speed, 0, 1, 1))
             online.append(tracker._reportable(t, z))
             whole.append(t.whole)
+        tracker.active.append(t)  # the whole paths hold its rows from its first reported frame, or none
+        rows = tracker.whole_paths()
+        assert rows["frame"][rows["track_id"] == 2].tolist() == (list(range(online.index(True), frames)) if t.whole else [])
         return online, whole
 
     online, whole = joins(0)
