@@ -248,3 +248,33 @@ def test_under_the_peak_z_guard_faint_trackers_make_room_for_a_bright_target():
     assert set(np.round(found[0.0]["x"])) == {10.0}  # the two spots only
     target = found[10.0]
     assert len(target) >= 10 and np.all(target["x"] > 35) and np.all(np.abs(target["y"] - 20) < 1.5)
+
+
+def test_still_frames_keeps_a_still_spot_that_goes_early_out_of_the_whole_paths():
+    """Under min_peak_z 10: a still 30σ spot present in frames 5–29, a still 30σ target present throughout and a
+    30σ target moving 0.3 px a frame.  With still_frames 30 the whole paths hold the two targets (the still one
+    from its first reported frame, as without the rule) and not the spot, which is reported online in fewer than
+    30 frames; with still_frames 0 they hold all three."""
+    rng = np.random.default_rng(5)
+    frames = rng.standard_normal((60, 40, 60)).astype(np.float32)
+    yy, xx = np.mgrid[0:40, 0:60]
+
+    def spot(x, y):
+        return 30.0 * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 0.7 ** 2))
+
+    for f in range(60):
+        frames[f] += spot(12, 10) + spot(10 + 0.3 * f, 30) + (spot(45, 20) if 5 <= f < 30 else 0)
+    out = {}
+    for still in (0, 30):
+        tracker = tbd.make_tracker("mm-phd", (40, 60), seed=0, min_peak_z=10.0, still_frames=still)
+        for frame in frames:
+            tracker.update(frame)
+        out[still] = (tracker.finish(), tracker.online())
+    whole, online = out[0]
+    spot_rows = lambda rows: rows[np.hypot(rows["x"] - 45, rows["y"] - 20) < 2]  # noqa: E731
+    still_rows = lambda rows: rows[np.hypot(rows["x"] - 12, rows["y"] - 10) < 2]  # noqa: E731
+    assert 0 < len(spot_rows(online)) < 30 and len(spot_rows(whole)) > 0
+    held_whole, held_online = out[30]
+    assert len(spot_rows(held_whole)) == 0 and held_online.tobytes() == online.tobytes()
+    assert still_rows(held_whole).tobytes() == still_rows(whole).tobytes() and len(still_rows(whole)) >= 40
+    assert len(held_whole) == len(whole) - len(spot_rows(whole))

@@ -5,6 +5,7 @@ import math
 
 from ...tables import TRACK_COLUMNS
 from ..registry import MethodSpec, keyword_factory
+from ..still_tracks import REAL_VIDEO_STILL_FRAMES
 from .params import MMPHDParams, mm_phd_params, pool_capacity
 from .params import derived
 from .tracker import MIN_FRAMES, MMPHDTracker, track_columns
@@ -19,7 +20,8 @@ SECTION_5_3 = {"psf_sigma": 0.6, "frame_interval": 2.0, "births": 5000, "models"
 
 # real still-camera video (drone-ir; docs/methods/mm-phd.md#real-video): Th = 7.7σ and I from 20 dB, where the
 # spatio-temporal z of clutter reaches tens of σ (at 10 dB the detector's n̂ ran to hundreds); the peak-z guard at
-# 18 (SGDS-PF's 16 let a bright clutter track through once faint trackers are evicted)
+# 18 (SGDS-PF's 16 let a bright clutter track through once faint trackers are evicted); whole paths take a still
+# track once it has been reported in 50 frames (methods/still_tracks.py)
 REAL_VIDEO_SNR_DB, REAL_VIDEO_MIN_PEAK_Z = 20.0, 18.0
 
 SPEC = MethodSpec(
@@ -32,7 +34,8 @@ SPEC = MethodSpec(
     scenario="long2012", min_frames=MIN_FRAMES,
     options=("background", "bad_pixels", "history"),
     aliases={"particles": "max_particles", "min_peak_z": "min_peak_z"},
-    real_video={"snr_db": REAL_VIDEO_SNR_DB, "min_peak_z": REAL_VIDEO_MIN_PEAK_Z},
+    real_video={"snr_db": REAL_VIDEO_SNR_DB, "min_peak_z": REAL_VIDEO_MIN_PEAK_Z,
+                "still_frames": REAL_VIDEO_STILL_FRAMES},
     rank=2, particle_count=lambda shape, params: pool_capacity(params),
     extra_columns=lambda params: track_columns(derived(params).models)[len(TRACK_COLUMNS):],
     bench_settings=lambda snr: dict(SECTION_5_3), bench_scene={"targets": 3, "snr": 4.5, "motion": "stay"},

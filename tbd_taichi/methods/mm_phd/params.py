@@ -11,6 +11,7 @@ from ...errors import ParameterError
 from ...long2012 import intensity_for_db
 from ...motion_models import check_models
 from ..registry import param, validate_params
+from ..still_tracks import still_frames_param, still_radius_param
 
 PAPER_SWITCH = "0.8,0.1,0.1; 0.3,0.6,0.1; 0.3,0.1,0.6"  # Eq. 39, rows and columns (CV, C-CT, AC-CT)
 PAPER_BIRTH_MODELS = "0.8,0.1,0.1"  # §5.2: β = θ
@@ -100,6 +101,8 @@ class MMPHDParams:
                               "settled below it make room for waiting captures (0: off, as in the paper; the "
                               "real-video profile's guard against clutter)", unit="σ",
                               source="not in the paper", low=0)
+    still_frames: int = still_frames_param()
+    still_radius: float = still_radius_param()
     max_tracks: int = param(16, doc="trackers alive at once (pool size; a capture beyond it waits)",
                             source="not in the paper", low=1, high=1024)
     adaptive_q: bool = param(True, doc="adaptive process noise (Eq. 21); off: Q = Q_min", source="§3.2, Fig. 2")

@@ -23,6 +23,7 @@ from ...errors import InputError
 from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
 from ...peak_guard import SETTLE_FRAMES, running_peak_z
+from ..still_tracks import joins_whole_paths
 from ...tables import TRACK_COLUMNS, _dtype
 from ..registry import OneSequence
 from .backward import BackwardRecursion
@@ -70,6 +71,9 @@ class Target:
     last_velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
     peak_z: float = 0.0  # running peak z at its estimates (peak_guard; min_peak_z)
     reported_span: tuple | None = None  # (first, last) frame it was reported in
+    reported_frames: int = 0  # frames it was reported in
+    first_reported_at: tuple | None = None  # (x, y) where it was first reported
+    whole: bool = False  # in the whole paths (methods/still_tracks.py)
 
     def tracked(self, k: int) -> None:
         """Frame k is tracked: keep it, the position and the velocity as the last tracked ones."""
@@ -142,6 +146,7 @@ class MMPHDTracker(OneSequence):
         self.targets: list[Target] = []
         self.det_count, self.next_id, self.frame = 0, 1, 0
         self.done_rows: list[tuple] = []
+        self.whole_ends: list[tuple[float, float]] = []  # (x, y) where each track of the whole paths halted
         self.online_rows: list[tuple] = []
         self.n_hat_history: list[float] = []
         self.confirmations: dict[int, int] = {}
@@ -284,6 +289,8 @@ class MMPHDTracker(OneSequence):
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(self._kept_rows(t))
+                if t.whole:
+                    self.whole_ends.append(tuple(float(v) for v in t.position))
                 if t.drops >= p.halt_drops:  # lost, not halted as another track's duplicate
                     self.halted.append(t)
         self.halted = [t for t in self.halted if self._revivable(t, k)]
@@ -312,6 +319,7 @@ class MMPHDTracker(OneSequence):
                 self.next_id += 1
             else:
                 t.confirmed, t.streak = True, p.confirm_frames
+                t.whole, t.reported_frames, t.first_reported_at = old.whole, old.reported_frames, old.first_reported_at
                 if self._reported(t, k):
                     released.append(t.rows[-1])
         return released
@@ -335,6 +343,11 @@ class MMPHDTracker(OneSequence):
         ok = t.confirmed and (self.p.min_peak_z <= 0 or t.peak_z >= self.p.min_peak_z)
         if ok:
             t.reported_span = (t.reported_span or (k,))[:1] + (k,)
+            t.reported_frames += 1
+            xy = tuple(float(v) for v in t.position)
+            t.first_reported_at = t.first_reported_at or xy
+            t.whole = t.whole or joins_whole_paths(t.first_reported_at, xy, t.reported_frames, self.p.still_frames,
+                                                   self.p.still_radius, self.whole_ends)
         return ok
 
     def _kept_rows(self, t: Target) -> list:
@@ -342,7 +355,7 @@ class MMPHDTracker(OneSequence):
         from the first to the last frame it was reported in, as SGDS-PF's guard keeps them."""
         if self.p.min_peak_z <= 0:
             return t.rows
-        if t.reported_span is None:
+        if not t.whole:  # never reported, or a still track that went before still_frames
             return []
         first, last = t.reported_span
         return [r for r in t.rows if first <= r[0] <= last]

@@ -5,6 +5,7 @@ equations to them."""
 from __future__ import annotations
 
 from ..registry import MethodSpec, keyword_factory
+from ..still_tracks import REAL_VIDEO_STILL_FRAMES
 from .params import PAPER_SALIENCY, SGDSParams
 from .tracker import MIN_FRAMES, PIPELINE_STAGES, SGDSPF
 
@@ -13,10 +14,6 @@ from .tracker import MIN_FRAMES, PIPELINE_STAGES, SGDSPF
 # times the running peak z's settling time) stays reported down to a running peak z of 12 (the profile's gate,
 # REAL_VIDEO's min_peak_z, is 16): a target proven bright is not cut where it fades for a while
 REAL_VIDEO_KEEP_PEAK_Z, REAL_VIDEO_KEEP_AFTER = 12.0, 50
-# ... and whole paths take a track that stays within 3 px (still_radius's default) of where it was first reported
-# once it has been reported in 50 frames (a moving or re-found track at once): still hot spots that appear and go
-# within 8-37 frames stay out, still targets stay for hundreds (docs/methods/sgds.md#real-video)
-REAL_VIDEO_STILL_FRAMES = 50
 
 
 def sgds_params(shape, snr: float | None = None, **overrides) -> SGDSParams:

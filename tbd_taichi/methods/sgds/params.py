@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from ...errors import ParameterError
 from ..registry import param, validate_params
+from ..still_tracks import still_frames_param, still_radius_param
 
 ICEF_REFERENCE_PIXELS = 200 * 200  # frame area at which icef_mean_ratio was chosen
 PAPER_SALIENCY = dict(lef_memory=0.0, msw_reference="search")  # Eq. 29 and Eq. 40's MSW as printed
@@ -89,12 +90,8 @@ class SGDSParams:
                                source="not in the paper", low=0)
     keep_after: int = param(0, doc="frames a track must have been reported in before keep_peak_z applies",
                             unit="frames", source="not in the paper", low=0)
-    still_frames: int = param(0, doc="whole paths: a track that stays within still_radius of where it was first "
-                              "reported joins them once reported in this many frames (0: at once)", unit="frames",
-                              source="not in the paper", low=0)
-    still_radius: float = param(3.0, doc="whole paths: a track that moves farther from where it was first reported, "
-                                "or begins this near where one of them ended, joins them at once", unit="px",
-                                source="not in the paper", low=0)
+    still_frames: int = still_frames_param()
+    still_radius: float = still_radius_param()
     icef_window: int = param(10, doc="ICEF = 1 also when MTW/MSW's geometric mean over this many frames is ≥ "
                              "icef_mean_ratio (1: Eq. 40 as printed)", unit="frames", source="not in the paper",
                              low=1)

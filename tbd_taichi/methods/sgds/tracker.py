@@ -42,6 +42,7 @@ from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
+from ..still_tracks import joins_whole_paths
 from ...tables import TRACK_DTYPE, make_table
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
                            icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
@@ -381,19 +382,10 @@ class SGDSPF(OneSequence):
         return ok
 
     def _stayed_or_moved(self, t: Track) -> bool:
-        """Whether a reported track goes into the whole paths (``still_frames`` > 0; not in the paper; online rows
-        are not held back): one that has stayed within ``still_radius`` px of where it was first reported does once
-        it has been reported in ``still_frames`` frames; one that moves farther, or that began within
-        ``still_radius`` of where a track of the whole paths ended (the target found again), at once.  Still hot
-        spots that appear and go in real video (IR_DRONE_142's for 29 and 37 frames) stay out; a still target that
-        stays is in, from its first reported frame (docs/methods/sgds.md#real-video)."""
-        x, y = t.last_xy()
-        t.first_reported_at = t.first_reported_at or (x, y)
-        if self.p.still_frames <= 0 or t.reported_frames >= self.p.still_frames:
-            return True
-        x0, y0 = t.first_reported_at
-        return math.hypot(x - x0, y - y0) > self.p.still_radius or any(
-            math.hypot(x0 - ex, y0 - ey) <= self.p.still_radius for ex, ey in self.whole_ends)
+        """Whether reported track t joins the whole paths now (:func:`~..still_tracks.joins_whole_paths`)."""
+        t.first_reported_at = t.first_reported_at or t.last_xy()
+        return joins_whole_paths(t.first_reported_at, t.last_xy(), t.reported_frames, self.p.still_frames,
+                                 self.p.still_radius, self.whole_ends)
 
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
