@@ -42,8 +42,8 @@ from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
-from ..still_tracks import joins_whole_paths
 from ...tables import TRACK_DTYPE, make_table
+from ..still_tracks import joins_whole_paths
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
                            icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
                            update_confidence, windowed_icef, within_duplicate_radius)
@@ -171,7 +171,9 @@ class SGDSPF(OneSequence):
     def whole_paths(self) -> np.ndarray:
         """Each reported track's whole path: from its first frame (before its confirmation) on; with
         ``min_peak_z`` > 0, from the first to the last frame it was reported in (the gaps between filled), since
-        the guard judges the stretches before and after as too faint to report (docs/methods/sgds.md#real-video)."""
+        the guard judges the stretches before and after as too faint to report, and with ``still_frames`` > 0
+        not a still track that went before it had been reported in still_frames frames (methods/still_tracks.py;
+        docs/methods/sgds.md#real-video)."""
         def kept(t: Track):
             if self.p.min_peak_z <= 0:
                 return t.path
@@ -378,10 +380,10 @@ class SGDSPF(OneSequence):
             t.reported_frames += 1
             frame = t.path[-1][0]
             t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
-            t.whole = t.whole or self._stayed_or_moved(t)
+            t.whole = t.whole or self._joins_whole_paths(t)
         return ok
 
-    def _stayed_or_moved(self, t: Track) -> bool:
+    def _joins_whole_paths(self, t: Track) -> bool:
         """Whether reported track t joins the whole paths now (:func:`~..still_tracks.joins_whole_paths`)."""
         t.first_reported_at = t.first_reported_at or t.last_xy()
         return joins_whole_paths(t.first_reported_at, t.last_xy(), t.reported_frames, self.p.still_frames,
