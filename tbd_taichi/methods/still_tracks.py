@@ -42,3 +42,24 @@ def joins_whole_paths(first_xy, xy, reported_frames: int, still_frames: int, sti
     x0, y0 = first_xy
     return math.hypot(xy[0] - x0, xy[1] - y0) > still_radius or any(
         math.hypot(x0 - ex, y0 - ey) <= still_radius for ex, ey in ends)
+
+
+class StillTrackRule:
+    """:func:`joins_whole_paths` for one tracker's tracks, which carry ``reported_frames``, ``first_reported_at``
+    and ``whole``; it keeps where the tracks of the whole paths ended."""
+
+    def __init__(self, still_frames: int, still_radius: float):
+        self.still_frames, self.still_radius = int(still_frames), float(still_radius)
+        self.ends: list[tuple[float, float]] = []  # (x, y) where each track of the whole paths ended
+
+    def reported(self, track, xy) -> None:
+        """``track`` is reported at ``xy`` (its ``reported_frames`` counting this frame): it joins the whole paths
+        if it has not yet and the rule says so now."""
+        track.first_reported_at = track.first_reported_at or xy
+        track.whole = track.whole or joins_whole_paths(track.first_reported_at, xy, track.reported_frames,
+                                                       self.still_frames, self.still_radius, self.ends)
+
+    def ended(self, track, xy) -> None:
+        """``track`` ended (or halted) at ``xy``."""
+        if track.whole:
+            self.ends.append(xy)

@@ -23,9 +23,9 @@ from ...errors import InputError
 from ...kernels.phd import LENGTH, NO_CENTRE
 from ...motion_models import VX, VY, X, Y
 from ...peak_guard import SETTLE_FRAMES, running_peak_z
-from ..still_tracks import joins_whole_paths
 from ...tables import TRACK_COLUMNS, _dtype
 from ..registry import OneSequence
+from ..still_tracks import StillTrackRule
 from .backward import BackwardRecursion
 from .estimation import Capture, adapted_scale, captures, live_dims, log_det, unpack
 from .params import derived, mm_phd_params, pool_capacity
@@ -146,7 +146,7 @@ class MMPHDTracker(OneSequence):
         self.targets: list[Target] = []
         self.det_count, self.next_id, self.frame = 0, 1, 0
         self.done_rows: list[tuple] = []
-        self.whole_ends: list[tuple[float, float]] = []  # (x, y) where each track of the whole paths halted
+        self.still_rule = StillTrackRule(self.p.still_frames, self.p.still_radius)  # which tracks the whole paths take
         self.online_rows: list[tuple] = []
         self.n_hat_history: list[float] = []
         self.confirmations: dict[int, int] = {}
@@ -289,8 +289,7 @@ class MMPHDTracker(OneSequence):
         for t in self.targets:
             if t.halted and t.confirmed:
                 self.done_rows.extend(self._kept_rows(t))
-                if t.whole:
-                    self.whole_ends.append(tuple(float(v) for v in t.position))
+                self.still_rule.ended(t, tuple(float(v) for v in t.position))
                 if t.drops >= p.halt_drops:  # lost, not halted as another track's duplicate
                     self.halted.append(t)
         self.halted = [t for t in self.halted if self._revivable(t, k)]
@@ -344,10 +343,7 @@ class MMPHDTracker(OneSequence):
         if ok:
             t.reported_span = (t.reported_span or (k,))[:1] + (k,)
             t.reported_frames += 1
-            xy = tuple(float(v) for v in t.position)
-            t.first_reported_at = t.first_reported_at or xy
-            t.whole = t.whole or joins_whole_paths(t.first_reported_at, xy, t.reported_frames, self.p.still_frames,
-                                                   self.p.still_radius, self.whole_ends)
+            self.still_rule.reported(t, tuple(float(v) for v in t.position))
         return ok
 
     def _kept_rows(self, t: Target) -> list:

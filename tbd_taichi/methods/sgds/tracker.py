@@ -43,7 +43,7 @@ from ...kernels.particles.layout import STATE
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
-from ..still_tracks import joins_whole_paths
+from ..still_tracks import StillTrackRule
 from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
                            icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
                            update_confidence, windowed_icef, within_duplicate_radius)
@@ -113,7 +113,7 @@ class SGDSPF(OneSequence):
         self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
         self.active: list[Track] = []
         self.finished: list[Track] = []
-        self.whole_ends: list[tuple[float, float]] = []  # (x, y) where each track of the whole paths ended
+        self.still_rule = StillTrackRule(self.p.still_frames, self.p.still_radius)  # which tracks the whole paths take
         self.next_track_id = 1
         self.online_rows: list[tuple] = []
         self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
@@ -380,14 +380,8 @@ class SGDSPF(OneSequence):
             t.reported_frames += 1
             frame = t.path[-1][0]
             t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
-            t.whole = t.whole or self._joins_whole_paths(t)
+            self.still_rule.reported(t, t.last_xy())
         return ok
-
-    def _joins_whole_paths(self, t: Track) -> bool:
-        """Whether reported track t joins the whole paths now (:func:`~..still_tracks.joins_whole_paths`)."""
-        t.first_reported_at = t.first_reported_at or t.last_xy()
-        return joins_whole_paths(t.first_reported_at, t.last_xy(), t.reported_frames, self.p.still_frames,
-                                 self.p.still_radius, self.whole_ends)
 
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
@@ -410,7 +404,6 @@ class SGDSPF(OneSequence):
         self.active.remove(t)
         self.free_groups.append(t.group)
         self.ended_groups.append(t.group)
-        if t.whole:
-            self.whole_ends.append(t.last_xy())
+        self.still_rule.ended(t, t.last_xy())
         if t.reported and self.history:
             self.finished.append(t)
