@@ -48,6 +48,7 @@ def test_the_replaced_taichi_names_exist_and_are_replaced():
     assert kernel_impl._get_tree_and_ctx is compile_speed.cached_tree_and_ctx
     assert kernel_impl._inside_class is compile_speed.inside_class
     assert ASTTransformerContext.get_pos_info is compile_speed.brief_position
+    assert all(m.get_traceback is compile_speed.brief_traceback for m in compile_speed.traceback_modules())
 
 
 def test_class_kernels_are_told_from_free_kernels_as_taichi_does():
@@ -73,6 +74,57 @@ def test_kernels_built_through_the_cached_front_end_compute_the_same():
     file, lines, start, text = compile_speed.function_source(squared_plus.func.func)  # read once, kept
     assert file == inspect.getsourcefile(squared_plus.func.func) and start == inspect.getsourcelines(squared_plus.func.func)[1]
     assert text.startswith("@ti.func\ndef squared_plus")
+
+
+def test_source_lines_match_inspect_for_every_taichi_function_of_the_project():
+    """Every ti.func and ti.kernel of tbd_taichi and tbd_taichi.kernels: the file's one parse gives the lines that
+    inspect's tokenising lookup gives (a decorated def, a class's method, a one-line body, a nested def)."""
+    import importlib
+    import pkgutil
+    import sys
+
+    from tbd_taichi import kernels
+
+    for package in (kernels, tbd_taichi, tbd_taichi.methods):  # each package's own imports bring its submodules
+        for info in pkgutil.iter_modules(package.__path__, package.__name__ + "."):
+            if not info.name.endswith("__main__"):
+                importlib.import_module(info.name)
+    seen = 0
+    for name, module in list(sys.modules.items()):
+        if name.split(".")[0] == "tbd_taichi":
+            for value in list(vars(module).values()) + [f for c in vars(module).values() if isinstance(c, type)
+                                                        for f in vars(c).values()]:
+                func = getattr(getattr(value, "_primal", value), "func", None)  # ti.kernel / ti.func wrappers
+                func = getattr(func, "func", func)
+                if not inspect.isfunction(func) or func.__module__ != module.__name__:
+                    continue
+                lines, start = inspect.getsourcelines(func)
+                assert compile_speed.source_lines(func) == (inspect.getsourcefile(func), lines, start), func
+                seen += 1
+    assert seen > 100
+
+    def outer():
+        @ti.func
+        def one_line(v): return v + 1  # noqa: E704
+
+        return one_line
+
+    nested = outer().func.func
+    assert compile_speed.source_lines(nested)[1:] == tuple(inspect.getsourcelines(nested))
+
+
+def test_declaration_tracebacks_keep_the_innermost_frames():
+    def declare():
+        return compile_speed.brief_traceback(1)  # as Taichi calls it: drop the declaring function's own frame
+
+    def user_code():
+        return declare()
+
+    text = compile_speed.brief_traceback(0)
+    assert "test_declaration_tracebacks_keep_the_innermost_frames" in text and "in brief_traceback" not in text
+    text = user_code()
+    assert text.count("File ") == compile_speed.TRACEBACK_FRAMES and "in user_code" in text.splitlines()[-2]
+    assert "in declare" not in text
 
 
 def test_a_compile_error_still_names_file_line_and_function():

@@ -16,7 +16,7 @@ import math
 
 import taichi as ti
 
-from ..particles.layout import PAD
+PAD = 4  # zero border of the frame the weights read: a 5×5 window (Eq. 15) that touches the image stays inside it
 
 TWO_PI = 2.0 * math.pi
 

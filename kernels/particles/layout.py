@@ -21,9 +21,9 @@ import taichi as ti
 
 from ..loops import THREAD_SPAN
 from ..rng import ExponentialTables, NormalTables
+from ..models.likelihood import PAD  # noqa: F401 (re-exported) the likelihood window's zero border
 
 TILE = 1024
-PAD = 4  # zero border of the frame the weights read: a 5×5 window (Eq. 15) that touches the image stays inside it
 WALKS = 4  # interleaved merge walks per tile in draw_parents
 NEG_INF = -3.0e38
 TWO_PI = 2.0 * math.pi
