@@ -87,7 +87,8 @@ class Preprocessor:
         new = lambda: np.zeros(self.shape, np.float32)  # noqa: E731
         self.residual, self.tmp, self.sum_a, self.sum_b = new(), new(), new(), new()
         self.temporal_bg, self.spike_rate = new(), new()
-        self.column_sums = np.zeros(self.shape[1], np.float64)  # running column sums of the box filter
+        self.column_sums = np.zeros((2, self.shape[1]), np.float64)  # running column sums of the box filters
+        self.ring_radii = (OUTER_RADIUS, GUARD_RADIUS)
         if background == "spatiotemporal":
             self.st_bg, self.st_noise, self.prev_s, self.prev_r, self.zeros = new(), new(), new(), new(), new()
             self.row_sums = np.zeros(self.shape[0], np.float64)
@@ -112,21 +113,14 @@ class Preprocessor:
             z = out
         return z
 
-    def box_sum(self, src: np.ndarray, dst: np.ndarray, r: int) -> None:
-        """(2r+1)² box sum with replicated borders (separable: rows, then columns)."""
-        self.k.box_sum_rows(src, self.tmp, r, self.serial)
-        self.k.box_sum_cols(self.tmp, dst, r, self.column_sums, self.serial)
-
     def residual_of(self, x: np.ndarray) -> np.ndarray:
         """frame − background (raw units) for the mean, spatial and temporal backgrounds."""
         r = self.residual
         if self.background == "mean":
             r[...] = x - np.float32(mean_background(x, 0.0))
         elif self.background in ("spatial", "spatiotemporal"):
-            self.box_sum(x, self.sum_a, OUTER_RADIUS)
-            self.box_sum(x, self.sum_b, GUARD_RADIUS)
-            self.k.hollow_residual(x, self.sum_a, self.sum_b, float((2 * OUTER_RADIUS + 1) ** 2),
-                                   float((2 * GUARD_RADIUS + 1) ** 2), r, self.serial)
+            self.k.ring_row_sums(x, self.sum_a, self.sum_b, OUTER_RADIUS, GUARD_RADIUS, self.serial)
+            self.k.hollow_residual(x, self.sum_a, self.sum_b, self.ring_radii, self.column_sums, r, self.serial)
         else:
             self.k.running_residual(x, self.temporal_bg, TEMPORAL_ALPHA, int(self.n_frames == 0), r, self.serial)
         return r
@@ -164,27 +158,23 @@ class Preprocessor:
         sigma_s = robust_sigma(s)
         r = self.moving_residual(s)
         t = self.n_frames
-        abs_sum = self.local_abs_sum(r, NOISE_CLIP * sigma_s)
-        self.k.running_residual(abs_sum, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)), int(t == 0), self.tmp,
-                                self.serial)
-        return self.over_local_sigma(r, self.st_noise, ST_FLOOR * sigma_s)
+        return self.over_local_sigma(r, NOISE_CLIP * sigma_s, self.st_noise, max(ST_NOISE_ALPHA, 1.0 / max(t, 1)),
+                                     t == 0, ST_FLOOR * sigma_s)
 
     def standardised(self, r: np.ndarray) -> np.ndarray:
         """r / local σ (see the module notes); global σ from the residual's MAD."""
         sigma = robust_sigma(r)
-        return self.over_local_sigma(r, self.local_abs_sum(r, NOISE_CLIP * sigma), NOISE_FLOOR * sigma)
+        return self.over_local_sigma(r, NOISE_CLIP * sigma, self.tmp, 0.0, True, NOISE_FLOOR * sigma)
 
-    def local_abs_sum(self, r: np.ndarray, clip: float) -> np.ndarray:
-        """Σ of min(|r|, clip) over the (2·NOISE_RADIUS + 1)² window around each pixel (in sum_b)."""
-        self.k.clipped_abs(r, clip, self.sum_a, self.serial)
-        self.box_sum(self.sum_a, self.sum_b, NOISE_RADIUS)
-        return self.sum_b
-
-    def over_local_sigma(self, r: np.ndarray, abs_sum: np.ndarray, floor: float) -> np.ndarray:
-        """z = r / max(√(π/2)·abs_sum/window, floor): the residual over its local σ (a new array:
-        callers keep recent frames)."""
+    def over_local_sigma(self, r: np.ndarray, clip: float, noise: np.ndarray, alpha: float, first: bool,
+                         floor: float) -> np.ndarray:
+        """z = r / max(√(π/2)·N/window, floor): the residual over its local σ, N the running mean (rate ``alpha``;
+        this frame's value where ``first``) of Σ min(|r|, clip) over the (2·NOISE_RADIUS + 1)² window around each
+        pixel, kept in ``noise``.  A new array: callers keep recent frames."""
         z = np.empty(self.shape, np.float32)
-        self.k.standardise(r, abs_sum, float((2 * NOISE_RADIUS + 1) ** 2), MEAN_ABS_TO_SIGMA, floor, z, self.serial)
+        self.k.clipped_abs_row_sums(r, clip, self.sum_a, NOISE_RADIUS, self.serial)
+        params = np.array([NOISE_RADIUS, alpha, float(first), MEAN_ABS_TO_SIGMA, floor], np.float64)
+        self.k.standardise(r, self.sum_a, noise, params, self.column_sums, z, self.serial)
         return z
 
     def bad_pixel_map(self) -> np.ndarray:

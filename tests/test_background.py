@@ -20,26 +20,78 @@ def images(rng, shape):
     yield np.where(rng.random(shape) < 0.5, -1e4, 1e4).astype(np.float32)  # extremes
 
 
+def box_sum_reference(x, r):
+    """(2r+1)² box sum with replicated borders, by OpenCV and by SciPy (f64); they must agree."""
+    k = 2 * r + 1
+    cv = cv2.boxFilter(x.astype(np.float64), -1, (k, k), normalize=False, borderType=cv2.BORDER_REPLICATE)
+    sp = ndi.uniform_filter(x.astype(np.float64), size=k, mode="nearest") * k * k
+    np.testing.assert_allclose(cv, sp, rtol=1e-9, atol=1e-9 * np.abs(x).max() * k * k)
+    return cv
+
+
 @pytest.mark.parametrize("shape", SHAPES)
-@pytest.mark.parametrize("r", [1, 5, 7])
+@pytest.mark.parametrize("radii", [(5, 2), (1, 0), (7, 3)])
 @pytest.mark.parametrize("serial", [False, True])
-def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r, serial):
+def test_hollow_residual_matches_twin_opencv_and_scipy(rng, shape, radii, serial):
+    """x − (box(r_outer) − box(r_inner)) / ring pixels: row and column passes, both loop modes bit-identical,
+    the twin to an f32 ulp of the sums, OpenCV's and SciPy's box filters to f32 rounding."""
+    ro, ri = radii
+    ring = (2 * ro + 1) ** 2 - (2 * ri + 1) ** 2
     for x in images(rng, shape):
-        tmp, got, ref = np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
-        kb.box_sum_rows(x, tmp, r, serial)
-        kb.box_sum_cols(tmp, got, r, np.zeros(shape[1]), serial)
+        rows_o, rows_i, got = np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
+        kb.ring_row_sums(x, rows_o, rows_i, ro, ri, serial)
+        kb.hollow_residual(x, rows_o, rows_i, radii, np.zeros((2, shape[1])), got, serial)
         other = np.zeros_like(x)  # the other loop mode: the same additions in the same order
-        kb.box_sum_cols(tmp, other, r, np.zeros(shape[1]), not serial)
+        kb.hollow_residual(x, rows_o, rows_i, radii, np.zeros((2, shape[1])), other, not serial)
         np.testing.assert_array_equal(other, got)
-        nb.box_sum_rows(x, tmp, r)
-        nb.box_sum_cols(tmp, ref, r)
-        scale = np.abs(x).max() * (2 * r + 1) ** 2
+        ref_rows_o, ref_rows_i, ref = np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
+        nb.ring_row_sums(x, ref_rows_o, ref_rows_i, ro, ri)
+        nb.hollow_residual(x, ref_rows_o, ref_rows_i, radii, None, ref)
+        scale = np.abs(x).max() * (2 * ro + 1) ** 2 / ring
         np.testing.assert_allclose(got, ref, rtol=F32_RTOL, atol=F32_RTOL * scale)
-        k = 2 * r + 1
-        cv = cv2.boxFilter(x.astype(np.float64), -1, (k, k), normalize=False, borderType=cv2.BORDER_REPLICATE)
-        sp = ndi.uniform_filter(x.astype(np.float64), size=k, mode="nearest") * k * k
-        np.testing.assert_allclose(got, cv, rtol=1e-5, atol=1e-6 * scale)
-        np.testing.assert_allclose(got, sp, rtol=1e-5, atol=1e-6 * scale)
+        expected = x - (box_sum_reference(x, ro) - box_sum_reference(x, ri)) / ring
+        np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("radius", [1, 7])
+@pytest.mark.parametrize("serial", [False, True])
+def test_local_noise_standardisation_matches_twin_and_opencv(rng, shape, radius, serial):
+    """z = r / max(c·N/n, floor), N the running mean of the clipped-|r| box sum: three frames (the first sets
+    N), both loop modes bit-identical, the twin to f32 rounding, and N against OpenCV's box filter."""
+    clip, c, floor, alpha = 2.5, 1.2533, 0.1, 0.3
+    n = (2 * radius + 1) ** 2
+    noise = {"taichi": np.zeros(shape, np.float32), "numpy": np.zeros(shape, np.float32),
+             "other": np.zeros(shape, np.float32), "ref": np.zeros(shape, np.float64)}
+    for first, r in enumerate(rng.standard_normal((3,) + shape).astype(np.float32) * 3):
+        p = np.array([radius, alpha, float(first == 0), c, floor])
+        rows, got, other, ref = (np.zeros_like(r) for _ in range(4))
+        kb.clipped_abs_row_sums(r, clip, rows, radius, serial)
+        kb.standardise(r, rows, noise["taichi"], p, np.zeros((2, shape[1])), got, serial)
+        kb.standardise(r, rows, noise["other"], p, np.zeros((2, shape[1])), other, not serial)
+        np.testing.assert_array_equal(other, got)
+        np.testing.assert_array_equal(noise["other"], noise["taichi"])
+        ref_rows = np.zeros_like(r)
+        nb.clipped_abs_row_sums(r, clip, ref_rows, radius)
+        nb.standardise(r, ref_rows, noise["numpy"], p, None, ref)
+        np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-6)
+        box = box_sum_reference(np.minimum(np.abs(r), clip), radius)
+        noise["ref"] = box if first == 0 else noise["ref"] + alpha * (box - noise["ref"])
+        np.testing.assert_allclose(noise["taichi"], noise["ref"], rtol=1e-5, atol=1e-5 * n)
+        np.testing.assert_allclose(got, r / np.maximum(c * noise["ref"] / n, floor), rtol=1e-4, atol=1e-5)
+
+
+def test_a_frames_own_local_noise_is_the_first_frame_rule(rng):
+    """first = 1 sets N to this frame's sum exactly, whatever N held and whatever α (the non-running modes)."""
+    r = rng.standard_normal((13, 31)).astype(np.float32)
+    rows = np.zeros_like(r)
+    kb.clipped_abs_row_sums(r, 2.0, rows, 7, True)
+    zs = []
+    for held, alpha in ((0.0, 0.0), (123.0, 0.7)):
+        noise, z = np.full_like(r, held), np.zeros_like(r)
+        kb.standardise(r, rows, noise, np.array([7, alpha, 1.0, 1.2533, 0.1]), np.zeros((2, 31)), z, True)
+        zs.append(z)
+    np.testing.assert_array_equal(zs[0], zs[1])
 
 
 @pytest.mark.parametrize("shape", SHAPES)
@@ -47,12 +99,6 @@ def test_box_sum_matches_twin_opencv_and_scipy(rng, shape, r, serial):
 def test_elementwise_kernels_match_twins(rng, shape, serial):
     """Both loop modes of every per-pixel kernel against its twin."""
     x, a, b = (rng.standard_normal(shape).astype(np.float32) * 5 for _ in range(3))
-    for name, args in [("hollow_residual", (x, a, b, 121.0, 25.0)), ("clipped_abs", (x, 2.5)),
-                       ("standardise", (x, np.abs(a), 225.0, 1.2533, 0.1))]:
-        got, ref = np.zeros_like(x), np.zeros_like(x)
-        getattr(kb, name)(*args, got, serial)
-        getattr(nb, name)(*args, ref)
-        np.testing.assert_allclose(got, ref, rtol=F32_RTOL, atol=1e-6, err_msg=name)
     got, ref = np.zeros_like(x), np.zeros_like(x)
     kb.rebase_background(x, a, got, serial)
     nb.rebase_background(x, a, ref)

@@ -16,16 +16,31 @@ def _box_sum_axis(src: np.ndarray, dst: np.ndarray, r: int, axis: int) -> None:
     dst[...] = (hi - lo).astype(np.float32)
 
 
-def box_sum_rows(src: np.ndarray, dst: np.ndarray, r: int, serial: bool = False) -> None:
-    _box_sum_axis(src, dst, r, 1)
+def ring_row_sums(x, rows_outer, rows_inner, r_outer: int, r_inner: int, serial: bool = False) -> None:
+    _box_sum_axis(x, rows_outer, r_outer, 1)
+    _box_sum_axis(x, rows_inner, r_inner, 1)
 
 
-def box_sum_cols(src: np.ndarray, dst: np.ndarray, r: int, acc=None, serial: bool = False) -> None:
-    _box_sum_axis(src, dst, r, 0)
+def hollow_residual(x, rows_outer, rows_inner, radii, acc, out, serial: bool = False) -> None:
+    outer, inner = np.empty_like(x), np.empty_like(x)
+    _box_sum_axis(rows_outer, outer, int(radii[0]), 0)
+    _box_sum_axis(rows_inner, inner, int(radii[1]), 0)
+    ring = np.float32((2 * int(radii[0]) + 1) ** 2) - np.float32((2 * int(radii[1]) + 1) ** 2)
+    out[...] = x - (outer - inner) / ring
 
 
-def hollow_residual(x, outer, inner, n_outer: float, n_inner: float, out, serial: bool = False) -> None:
-    out[...] = x - (outer - inner) / np.float32(np.float32(n_outer) - np.float32(n_inner))
+def clipped_abs_row_sums(r, clip: float, rows, radius: int, serial: bool = False) -> None:
+    _box_sum_axis(np.minimum(np.abs(r), np.float32(clip)), rows, radius, 1)
+
+
+def standardise(r, rows, noise, p, acc, out, serial: bool = False) -> None:
+    radius, alpha, first, to_sigma, floor = int(p[0]), np.float32(p[1]), p[2] != 0, np.float32(p[3]), np.float32(p[4])
+    abs_sum = np.empty_like(r)
+    _box_sum_axis(rows, abs_sum, radius, 0)
+    if first:
+        noise[...] = abs_sum
+    noise += alpha * (abs_sum - noise)
+    out[...] = r / np.maximum(to_sigma * noise / np.float32((2 * radius + 1) ** 2), floor)
 
 
 def running_residual(x, bg, alpha: float, first: int, out, serial: bool = False) -> None:
@@ -41,14 +56,6 @@ def rebase_background(s, prev_r, bg, serial: bool = False) -> None:
 
 def row_abs_difference_sums(a, b, out, serial: bool = False) -> None:
     out[...] = np.abs(a.astype(np.float64) - b.astype(np.float64)).sum(axis=1)
-
-
-def clipped_abs(r, clip: float, out, serial: bool = False) -> None:
-    out[...] = np.minimum(np.abs(r), np.float32(clip))
-
-
-def standardise(r, abs_sum, n: float, to_sigma: float, floor: float, out, serial: bool = False) -> None:
-    out[...] = r / np.maximum(np.float32(to_sigma) * abs_sum / np.float32(n), np.float32(floor))
 
 
 def isolated_spikes(z, rate, rho: float, z_hi: float, ratio: float, rate_max: float, out, serial: bool = False) -> None:
