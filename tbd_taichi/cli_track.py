@@ -255,7 +255,7 @@ def run_tracker(plan: TrackPlan, args, writer, say) -> tuple[np.ndarray, int, Ru
     max_projection, frames, busy, first_frame_at = None, 0, 0.0, None
     in_updates = compile_totals()  # kernels built by the tracker's constructor are start-up's
     with frame_progress("tracking", plan.source.n_frames, args.progress) as progress:
-        for frame in io.iter_frames(plan.source, min_frames=plan.spec.min_frames):
+        for frame in io.prefetched(io.iter_frames(plan.source, min_frames=plan.spec.min_frames)):
             first_frame_at = seconds_since_start() if first_frame_at is None else first_frame_at
             started = time.perf_counter()
             rows = tracker.update(frame)

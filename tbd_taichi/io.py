@@ -4,7 +4,8 @@ Two ways in:
 
 * :func:`read_frames` loads a whole sequence as a float32 array (T, H, W);
 * :func:`iter_frames` streams it one float32 (H, W) frame at a time, so a long
-  video or a memory-mapped ``.npy`` is never loaded whole.
+  video or a memory-mapped ``.npy`` is never loaded whole; :func:`prefetched` decodes
+  ahead in a second thread while the caller works on the current frame.
 
 Frames keep their raw values (8-bit, 14-bit or float); normalisation to unit
 noise is :mod:`tbd_taichi.normalize`'s job.  Colour images and videos are
@@ -14,7 +15,9 @@ the path and the problem.
 from __future__ import annotations
 
 import os
+import queue
 import re
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -254,3 +257,50 @@ def read_frames(source, min_frames: int = 1) -> np.ndarray:
     if not frames:
         raise _too_few(src.name, 0, max(min_frames, 1))
     return np.stack(frames)
+
+
+PREFETCH_FRAMES = 32  # frames decoded ahead by prefetched(): 2.6 MiB at 320 × 256 float32
+_END = object()
+
+
+def prefetched(frames: Iterator[np.ndarray], depth: int = PREFETCH_FRAMES) -> Iterator[np.ndarray]:
+    """``frames``, decoded up to ``depth`` frames ahead in a daemon thread (OpenCV's decoder and NumPy's casts
+    release the GIL, so decoding overlaps the caller's work on a second core).  The same frames in the same
+    order; an error raised while decoding is raised here, at the frame where it happened; a caller that stops
+    early stops the decoder."""
+    ahead: queue.Queue = queue.Queue(maxsize=max(int(depth), 1))
+    stop = threading.Event()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                ahead.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def decode() -> None:
+        try:
+            for frame in frames:
+                if not put(frame):
+                    return
+            put(_END)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
+            put(exc)
+        finally:
+            getattr(frames, "close", lambda: None)()  # a stopped generator releases its file or video now
+
+    worker = threading.Thread(target=decode, name="frame-decoder", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = ahead.get()
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        worker.join()

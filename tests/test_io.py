@@ -153,3 +153,45 @@ def test_too_few_frames(tmp_path, seq):
         io.read_frames(tmp_path / "a.npy", min_frames=7)
     with pytest.raises(InputError, match="at least 7"):
         next(io.iter_frames(tmp_path / "a.npy", min_frames=7))
+
+
+def test_prefetched_frames_are_the_same_frames_in_order(tmp_path, seq):
+    np.save(tmp_path / "a.npy", seq)
+    direct = list(io.iter_frames(tmp_path / "a.npy"))
+    ahead = list(io.prefetched(io.iter_frames(tmp_path / "a.npy"), depth=2))  # the decoder waits on a full queue
+    assert len(ahead) == len(direct) == 6
+    for a, b in zip(ahead, direct):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_decoding_error_reaches_the_caller_at_its_frame():
+    def frames():
+        yield np.zeros((3, 3), np.float32)
+        yield np.ones((3, 3), np.float32)
+        raise InputError("clip.mp4: declares 9 frames, only 2 decoded")
+
+    got = []
+    with pytest.raises(InputError, match="only 2 decoded"):
+        for frame in io.prefetched(frames()):
+            got.append(float(frame[0, 0]))
+    assert got == [0.0, 1.0]
+
+
+def test_a_caller_that_stops_early_stops_the_decoder():
+    import threading
+
+    closed, produced = threading.Event(), []
+
+    def frames():
+        try:
+            for k in range(1000):
+                produced.append(k)
+                yield np.full((2, 2), k, np.float32)
+        finally:
+            closed.set()
+
+    stream = io.prefetched(frames(), depth=4)
+    assert float(next(stream)[0, 0]) == 0.0
+    stream.close()  # the caller leaves the loop (an error in the tracker, a break)
+    assert closed.is_set() and len(produced) <= 1 + 4 + 2  # the frame in hand, a full queue, one being put
+    assert not any(t.name == "frame-decoder" for t in threading.enumerate())
