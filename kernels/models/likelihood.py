@@ -50,11 +50,12 @@ class PointPSFLikelihood:
 
     @ti.func
     def log_ratio(self, x: ti.f32, y: ti.f32, inten: ti.f32, zp: ti.template(), constants: ti.template(),
-                  h: ti.template(), w: ti.template()) -> ti.f32:
+                  h: ti.template(), w: ti.template(), row0: ti.i32 = 0) -> ti.f32:
         """Eq. 15 in the log domain: log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with
         h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14), over the in-image pixels of the 5×5 window around
         (⌊x+½⌋, ⌊y+½⌋).  The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five
-        samples come from two exponentials (:meth:`samples`).  ``constants``: those of :meth:`constants`."""
+        samples come from two exponentials (:meth:`samples`).  ``constants``: those of :meth:`constants`; ``row0``:
+        the bordered frame's first row in ``zp`` (frames stacked one above the other)."""
         inv2s2, norm, inv_var, step = constants
         cx = ti.cast(ti.floor(x + 0.5), ti.i32)
         cy = ti.cast(ti.floor(y + 0.5), ti.i32)
@@ -63,7 +64,7 @@ class PointPSFLikelihood:
         # first window row/column in the padded frame; outside pixels read the zero
         # border (and their g is 0), so the sum needs no branches.  A window that
         # misses the image (g all 0) is clamped to one that does not overflow.
-        r0 = ti.min(ti.max(cy, -2), h + 1) + PAD - 2
+        r0 = ti.min(ti.max(cy, -2), h + 1) + PAD - 2 + row0
         c0 = ti.min(ti.max(cx, -2), w + 1) + PAD - 2
         sz = ti.f32(0.0)
         for j in ti.static(range(5)):

@@ -53,18 +53,21 @@ def psf_constants(psf_sigma, noise_sigma) -> tuple:
     return inv2s2, norm, inv_var, np.exp(F32(-2.0) * inv2s2)
 
 
-def point_psf_log_ratio(x: np.ndarray, y: np.ndarray, inten: np.ndarray, z: np.ndarray, constants) -> np.ndarray:
+def point_psf_log_ratio(x: np.ndarray, y: np.ndarray, inten: np.ndarray, z: np.ndarray, constants,
+                        frame: np.ndarray | None = None) -> np.ndarray:
     """Twin of ``PointPSFLikelihood.log_ratio`` for E = 1 particles at (x, y) px with intensities ``inten`` on
-    the normalised frame z (H, W, no border): Eq. 15 over the in-image pixels of each 5×5 window."""
+    the normalised frame z (H, W, no border): Eq. 15 over the in-image pixels of each 5×5 window.  With a stack
+    of frames z (K, H, W), ``frame`` gives each particle's frame (index into the stack)."""
     inv2s2, norm, inv_var, step = constants
-    h, w = z.shape
+    h, w = z.shape[-2:]
     cx = np.floor(x + F32(0.5)).astype(np.int64)
     cy = np.floor(y + F32(0.5)).astype(np.int64)
     k = np.arange(-2, 3)
     px, py = cx[:, None] + k, cy[:, None] + k
     gx = psf_samples((cx - 2).astype(F32) - x, inv2s2, step, px, w)
     gy = psf_samples((cy - 2).astype(F32) - y, inv2s2, step, py, h)
-    zwin = z[np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]]
+    rows, cols = np.clip(py, 0, h - 1)[:, :, None], np.clip(px, 0, w - 1)[:, None, :]
+    zwin = z[rows, cols] if frame is None else z[np.asarray(frame)[:, None, None], rows, cols]
     use = (gy[:, :, None] > 0) & (gx[:, None, :] > 0)
     sz = np.zeros(len(x), F32)
     for j in range(5):

@@ -49,6 +49,7 @@ from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK
                            update_confidence, windowed_icef, within_duplicate_radius)
 from ..registry import OneSequence
 from .params import SGDSParams
+from .handover import HANDOVER_STREAM, RecentFrames, engine_kernels, multi_frame_draws
 from .populations import eliminated_per_population, resize_population, slab_populations
 from .searching_pool import SearchingPool
 
@@ -114,6 +115,8 @@ class SGDSPF(OneSequence):
         self.active: list[Track] = []
         self.finished: list[Track] = []
         self.still_rule = StillTrackRule(self.p.still_frames, self.p.still_radius)  # which tracks the whole paths take
+        self.recent = RecentFrames(self.p.handover_frames, self.shape)  # the frames the multi-frame hand-over sums over
+        self.handover_kernels = engine_kernels(engine) if self.p.handover_frames else None
         self.next_track_id = 1
         self.online_rows: list[tuple] = []
         self.stage_seconds = dict.fromkeys(PIPELINE_STAGES, 0.0)  # cumulative wall time per stage
@@ -195,6 +198,7 @@ class SGDSPF(OneSequence):
         tracks' confirmation, then Eq. 37's elimination and the hand-over of frame f's potential targets,
         whose tracking PFs first step at f + 1 (a handed PP's particles have already weighed frame f)."""
         f, z = front.frame, front.z
+        self.recent.add(f, z)
         t0 = time.perf_counter()
         seq, est = self._filter_step(f, z, front)
         log_msw = self._log_msw(front)
@@ -289,14 +293,14 @@ class SGDSPF(OneSequence):
         starts = np.cumsum(sizes) - sizes
         mean = self._pp_means(members, starts) if len(sizes) else {}
         near_tracked = near_any_of(tracked, mean["x"], mean["y"]).tolist() if len(sizes) else []
-        picks, groups = [], []
+        chosen, groups = [], []  # (first particle, PP size, uniforms) of each PP handed over
         for k in range(len(sizes)):
             if not self.free_groups:
                 break
             x, y = float(mean["x"][k]), float(mean["y"][k])
             if near_tracked[k] or near_any(tracked[len(tracked) - len(groups):], x, y):  # or a new track
                 continue
-            picks.append(starts[k] + resize_population(sizes[k], n_tpf, rng.random(max(n_tpf, sizes[k]))))
+            chosen.append((starts[k], sizes[k], rng.random(max(n_tpf, sizes[k]))))
             groups.append(self.free_groups.pop())
             track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
                           log_ratios=deque(maxlen=self.p.icef_window),
@@ -309,10 +313,23 @@ class SGDSPF(OneSequence):
         if not groups and not emptied:
             return
         order = np.argsort(groups)
+        picks = self._handed_over(f, members, chosen)
         index = np.concatenate([picks[k] for k in order]) if groups else np.zeros(0, np.int64)
         # the emptied groups that no new track took are touched with no particles: their count becomes 0
         self.tracks_pool.load_states(np.repeat(np.asarray(groups, np.int64)[order], n_tpf),
                                      {name: members[name][index] for name in STATE}, sorted(set(groups + emptied)))
+
+    def _handed_over(self, f: int, members: dict, chosen: list) -> list:
+        """For each PP handed over at frame f, (first particle, size, uniforms) in ``chosen``, the indices of the N_tpf
+        particles its tracking PF takes: Algorithm 2's uniform elimination or copying (from the uniforms), or with
+        ``handover_frames`` > 0 the multi-frame draw (handover.py; one launch for all of them, the k-th PP's
+        generator keyed on draw k + 1)."""
+        p = self.p
+        if p.handover_frames == 0:
+            return [start + resize_population(n, p.N_tpf, u) for start, n, u in chosen]
+        rngs = [np.random.default_rng([self.seed, f, HANDOVER_STREAM, k + 1]) for k in range(len(chosen))]
+        return multi_frame_draws(self.handover_kernels, members, [(start, n) for start, n, _ in chosen], p.N_tpf,
+                                 self.recent, f, (p.psf_sigma, p.noise_sigma), rngs, p.handover_jitter)
 
     @staticmethod
     def _pp_means(members: dict, starts: np.ndarray) -> dict:
