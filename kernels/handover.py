@@ -13,13 +13,14 @@ LIKELIHOOD = PointPSFLikelihood()
 
 @ti.kernel
 def retrodicted_log_ratio(state: F32_2, frames: F32_2, back: F32_1, slots: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                          constants: F32_1, shape: ti.template(), out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
+                          constants: F32_1, h: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1)):
     """out[i] = Σ_k log ω̃(z_k | x_i − back[k]·vx_i, y_i − back[k]·vy_i, I_i) (Eq. 15), summed over k in order in
-    f64.  ``state``: rows x, y, vx, vy, inten (px, px/frame, σ units) of the particles; ``frames``: frames of
-    ``shape`` = (h, w), each with its zero border of PAD pixels, stacked one above the other; z_k is the one in
-    slot ``slots[k]`` (rows from slots[k]·(h + 2·PAD)); ``constants``: Eq. 15's, as
-    ``numpy_kernels.models.psf_constants`` gives them (host-computed, so both engines use the same bits)."""
-    h, w = ti.static(shape[0], shape[1])
+    f64.  ``state``: rows x, y, vx, vy, inten (px, px/frame, σ units) of the particles; ``frames``: frames of h rows
+    (and frames.shape[1] − 2·PAD columns), each with its zero border of PAD pixels, stacked one above the other;
+    z_k is the one in slot ``slots[k]`` (rows from slots[k]·(h + 2·PAD)); ``constants``: Eq. 15's, as
+    ``numpy_kernels.models.psf_constants`` gives them (host-computed, so both engines use the same bits).  The
+    frame size is a run-time value: one compiled kernel serves every size."""
+    w = frames.shape[1] - 2 * PAD
     c = (constants[0], constants[1], constants[2], constants[3])
     for i in range(state.shape[1]):
         x, y, vx, vy, inten = state[0, i], state[1, i], state[2, i], state[3, i], state[4, i]

@@ -119,10 +119,13 @@ def test_long_window_only_adds_confirmations():
     0.55 and 0.67) and confirms no noise track.  The window decides confirmation only, so every track
     Eq. 43 confirms is reported with the same rows either way.  Over seeds 50–79 and 90–119 the window
     found 4 more targets (55, 56, 60, 104) with the same false tracks (1, in seed 77) and the same rows
-    for every track Eq. 43 confirms."""
+    for every track Eq. 43 confirms.  Measured with Algorithm 2's uniform hand-over draw (handover_frames 0), which
+    this test keeps: with the SNR 1.2 preset's multi-frame hand-over one of the two targets is found with the
+    window and one without it, so these two seeds no longer isolate the window."""
     found = {0: 0, 30: 0}
     for seed in (55, 60):
-        runs = {window: run((200, 200), 150, 1.2, seed, confirm_window=window) for window in (0, 30)}
+        runs = {window: run((200, 200), 150, 1.2, seed, confirm_window=window, handover_frames=0)
+                for window in (0, 30)}
         paper, windowed = runs[0][1], runs[30][1]
         truth = runs[0][2].truth
         kept = np.isin(windowed["track_id"], paper["track_id"])

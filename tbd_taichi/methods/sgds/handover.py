@@ -74,7 +74,7 @@ def retrodicted_log_ratio(kernels, state: dict, recent: RecentFrames, frame: int
     out = np.zeros(rows.shape[1], np.float64)
     if len(back) and rows.shape[1]:
         constants = np.array(psf_constants(*sigmas), np.float32)
-        kernels.retrodicted_log_ratio(rows, recent.frames, back, slots, constants, recent.shape, out)
+        kernels.retrodicted_log_ratio(rows, recent.frames, back, slots, constants, recent.shape[0], out)
     return out
 
 
