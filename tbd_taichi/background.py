@@ -54,6 +54,7 @@ BACKGROUNDS = ("none", "mean", "spatial", "temporal", "spatiotemporal")
 DEFAULT_BACKGROUND = "none"  # see the module notes; real video: REAL_VIDEO
 REAL_VIDEO = dict(background="spatiotemporal", snr=5.0, min_peak_z=16.0)  # SGDSPF settings for real still-camera video (README)
 OUTER_RADIUS, GUARD_RADIUS = 5, 2  # hollow window: 11×11 minus the central 5×5
+RING_RADII = (OUTER_RADIUS, GUARD_RADIUS)  # hollow_residual's compile-time radii
 NOISE_RADIUS = 7  # 15×15 local noise window
 NOISE_CLIP = 3.0  # residuals clipped at 3σ_global before the local noise mean
 NOISE_FLOOR = 0.1  # local σ ≥ 0.1·σ_global
@@ -88,7 +89,6 @@ class Preprocessor:
         self.residual, self.tmp, self.sum_a, self.sum_b = new(), new(), new(), new()
         self.temporal_bg, self.spike_rate = new(), new()
         self.column_sums = np.zeros((2, self.shape[1]), np.float64)  # running column sums of the box filters
-        self.ring_radii = (OUTER_RADIUS, GUARD_RADIUS)
         if background == "spatiotemporal":
             self.st_bg, self.st_noise, self.prev_s, self.prev_r, self.zeros = new(), new(), new(), new(), new()
             self.row_sums = np.zeros(self.shape[0], np.float64)
@@ -119,8 +119,8 @@ class Preprocessor:
         if self.background == "mean":
             r[...] = x - np.float32(mean_background(x, 0.0))
         elif self.background in ("spatial", "spatiotemporal"):
-            self.k.ring_row_sums(x, self.sum_a, self.sum_b, OUTER_RADIUS, GUARD_RADIUS, self.serial)
-            self.k.hollow_residual(x, self.sum_a, self.sum_b, self.ring_radii, self.column_sums, r, self.serial)
+            self.k.ring_row_sums(x, self.sum_a, self.sum_b, *RING_RADII, self.serial)
+            self.k.hollow_residual(x, self.sum_a, self.sum_b, RING_RADII, self.column_sums, r, self.serial)
         else:
             self.k.running_residual(x, self.temporal_bg, TEMPORAL_ALPHA, int(self.n_frames == 0), r, self.serial)
         return r

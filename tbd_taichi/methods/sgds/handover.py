@@ -15,8 +15,8 @@ N_tpf particles are then drawn ∝ exp(s_i) (systematic resampling).  With ``jit
 gets N(0, σ_v²) px/frame per axis, so the draw can choose among more velocities than the searching PF kept.
 Frame f itself is not summed again: the PP's particles were resampled on it in the searching PF's step.
 
-The sum is one kernel launch per handed-over PP (``kernels/handover.py``, NumPy twin
-``numpy_kernels/handover.py``) over the frames kept in a ring (:class:`RecentFrames`).  The draw's randomness comes
+The sum is one kernel launch a frame for every PP handed over in it (``kernels/handover.py``, NumPy twin
+``numpy_kernels/handover.py``), over the frames kept in a ring (:class:`RecentFrames`).  The draw's randomness comes
 from a NumPy generator keyed on (seed, frame, HANDOVER_STREAM, draw), the draw counting the tracks begun at the
 frame from 1, so the tracker's other draws are the same as without it.
 """
