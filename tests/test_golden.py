@@ -15,17 +15,18 @@ SCENES = {  # name: simulate arguments
     "sim100": ["--shape", "100", "120", "--frames", "60", "--snr", "1.6", "--targets", "2", "--seed", "5",
                "--motion", "transit"],
 }
+PAPER_HANDOVER = ["--param", "handover_frames=0", "--param", "backfill_frames=0"]
 CASES = {  # golden file stem: (input, track arguments)
     "sgds_sim50": ("sim50", ["--method", "sgds", "--seed", "1"]),
     "pf_sim50": ("sim50", ["--method", "pf", "--seed", "1"]),
     "sgds_sim100_online": ("sim100", ["--method", "sgds", "--seed", "2", "--paths", "online"]),
     "pf_sim100": ("sim100", ["--method", "pf", "--seed", "2", "--snr", "1.6", "--particles", "20000"]),
     "sgds_drone021_real": ("drone021", ["--real-video"]),
-    # Algorithm 2's uniform hand-over draw (handover_frames = 0): the files made before the multi-frame hand-over
-    # (the real-video profile's snr 5 preset has it off, so its file is unchanged)
-    "sgds_sim50_handover0": ("sim50", ["--method", "sgds", "--seed", "1", "--param", "handover_frames=0"]),
-    "sgds_sim100_online_handover0": ("sim100", ["--method", "sgds", "--seed", "2", "--paths", "online", "--param",
-                                                "handover_frames=0"]),
+    # Algorithm 2's uniform hand-over draw (handover_frames = 0) and no backfill: the files made before the
+    # multi-frame hand-over (the real-video profile's snr 5 preset has both off, so its file is unchanged)
+    "sgds_sim50_handover0": ("sim50", ["--method", "sgds", "--seed", "1", *PAPER_HANDOVER]),
+    "sgds_sim100_online_handover0": ("sim100", ["--method", "sgds", "--seed", "2", "--paths", "online",
+                                                *PAPER_HANDOVER]),
 }
 
 

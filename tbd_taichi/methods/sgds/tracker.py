@@ -44,9 +44,9 @@ from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
 from ..still_tracks import StillTrackRule
-from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
-                           icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
-                           update_confidence, windowed_icef, within_duplicate_radius)
+from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, backfilled,
+                           held_compact, icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any,
+                           near_any_of, scef, update_confidence, windowed_icef, within_duplicate_radius)
 from ..registry import OneSequence
 from .params import SGDSParams
 from .handover import HANDOVER_STREAM, RecentFrames, engine_kernels, multi_frame_draws
@@ -172,7 +172,9 @@ class SGDSPF(OneSequence):
             self._clock("waiting", t0)
 
     def whole_paths(self) -> np.ndarray:
-        """Each reported track's whole path: from its first frame (before its confirmation) on; with
+        """Each reported track's whole path: from its first frame (before its confirmation) on, after up to
+        ``backfill_frames`` frames taken back along its first points' line (confirmation.backfilled; not with
+        ``min_peak_z`` > 0, whose gate judged the frames before too faint); with
         ``min_peak_z`` > 0, from the first to the last frame it was reported in (the gaps between filled), since
         the guard judges the stretches before and after as too faint to report, and with ``still_frames`` > 0
         not a still track that went before it had been reported in still_frames frames (methods/still_tracks.py;
@@ -183,8 +185,12 @@ class SGDSPF(OneSequence):
             first, last = t.reported_span
             return (row for row in t.path if first <= row[0] <= last)
 
+        def whole(t: Track):
+            path = list(kept(t))
+            return (backfilled(path, self.p.backfill_frames, self.shape) if self.p.min_peak_z <= 0 else []) + path
+
         rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.whole
-                for (f, x, y, vx, vy, i, c) in kept(t)]
+                for (f, x, y, vx, vy, i, c) in whole(t)]
         return make_table(rows, TRACK_DTYPE)
 
     def online(self) -> np.ndarray:

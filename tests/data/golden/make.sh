@@ -12,8 +12,8 @@ for e in taichi numpy; do
   tbd-taichi track "$T/sim100.npz" --method sgds --engine $e --seed 2 --paths online --out $G/sgds_sim100_online_$e.csv
   tbd-taichi track "$T/sim100.npz" --method pf --engine $e --seed 2 --snr 1.6 --particles 20000 --out $G/pf_sim100_$e.csv
   tbd-taichi track tests/data/IR_DRONE_021.mp4 --real-video --engine $e --out $G/sgds_drone021_real_$e.csv
-  # Algorithm 2's uniform hand-over draw, as the SGDS files were before the multi-frame hand-over
-  H="--param handover_frames=0"
+  # Algorithm 2's uniform hand-over draw and no backfill, as the SGDS files were before the multi-frame hand-over
+  H="--param handover_frames=0 --param backfill_frames=0"
   tbd-taichi track "$T/sim50.npz" --method sgds --engine $e --seed 1 $H --out $G/sgds_sim50_handover0_$e.csv
   tbd-taichi track "$T/sim100.npz" --method sgds --engine $e --seed 2 --paths online $H \
     --out $G/sgds_sim100_online_handover0_$e.csv
