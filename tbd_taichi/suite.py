@@ -102,7 +102,7 @@ def run_one(run: Run) -> dict:
     if recorder is not None:
         from .methods.sgds.explain import explained_fields
 
-        row.update(explained_fields(recorder, tracks, scene.truth, scores["dsr"]))
+        row.update(explained_fields(recorder, scene.truth, scores["dsr"]))
     return row
 
 

@@ -147,30 +147,3 @@ def near_any_of(points: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.zeros(len(x), bool)
     p = np.asarray(points, np.float64)
     return within_duplicate_radius(x, y, p[:, 0], p[:, 1]).any(axis=1)
-
-
-
-BACKFILL_FIT = 20  # path points the backfill's line is fitted to
-
-
-def backfilled(path, frames: int, shape: tuple, fit: int = BACKFILL_FIT) -> list:
-    """The ``frames`` rows before a path's first (frames f0 − frames … f0 − 1; none before frame 0 or outside the
-    image of ``shape``, (rows, columns)), oldest first: on the least-squares line x(f), y(f) through the path's
-    first ``fit`` points (constant velocity, Eq. 9 without noise; one point: its own velocity). Rows as the path's,
-    (frame, x, y, vx, vy, intensity, confidence), with the line's velocity (px/frame) and the first row's intensity
-    and confidence.  Not in the paper (docs/methods/sgds.md#searching-and-tracking-modes)."""
-    head = list(path)[:fit]
-    if frames <= 0 or not head:
-        return []
-    f0, x0, y0, vx, vy, inten, conf = head[0]
-    if len(head) > 1:
-        f = np.array([row[0] for row in head], np.float64)
-        vx, x0 = np.polyfit(f - f0, [row[1] for row in head], 1)
-        vy, y0 = np.polyfit(f - f0, [row[2] for row in head], 1)
-    h, w = shape
-    rows = []
-    for g in range(max(f0 - frames, 0), f0):
-        x, y = x0 + (g - f0) * vx, y0 + (g - f0) * vy
-        if -0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5:
-            rows.append((g, float(x), float(y), float(vx), float(vy), inten, conf))
-    return rows

@@ -16,8 +16,8 @@ position, Eq. 48's gate):
 A run is *missed* when its DSR ≤ T1 (Eq. 49's failure) and *late* when its tracks first come within T0 more
 than LATE_FRAMES frames after the target's first frame.  The verdict names the first stage the target never
 reached, or for a late run the slowest step: to the first candidate, from it to the first hand-over, or from
-that to the first detection (a track's whole path is reported from its hand-over, so a gap there means the
-early hand-overs were never confirmed).
+that to the first detection (a track's whole path without the backfill is reported from its hand-over, so a gap
+there means the early hand-overs were never confirmed).
 """
 from __future__ import annotations
 
@@ -141,9 +141,10 @@ def verdict(frames: StageFrames, dsr: float, detected_at: int | None) -> str:
     return max(steps, key=steps.get)
 
 
-def explained_fields(recorder: StageRecorder, tracks: np.ndarray, truth: np.ndarray, dsr: float) -> dict:
-    """The suite row's fields: the verdict (``stage``) and each stage's first frame."""
-    detected_at = first_detection(tracks, truth)
+def explained_fields(recorder: StageRecorder, truth: np.ndarray, dsr: float) -> dict:
+    """The suite row's fields: the verdict (``stage``) and each stage's first frame.  The first detection is taken
+    from the whole paths without the backfill (backfill.py), whose rows before the hand-over are retrodicted."""
+    detected_at = first_detection(recorder.tracker.whole_paths(backfill=False), truth)
     frames = recorder.frames
     return dict(stage=verdict(frames, dsr, detected_at), detected_at=detected_at,
                 **{f"{k}_at": v for k, v in asdict(frames).items() if k not in ("dropped", "truth_first")},

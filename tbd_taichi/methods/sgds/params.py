@@ -27,7 +27,7 @@ TABLE2 = (
     (150, 8000, 0.2, 4, 0.2, 6),  # T_ft, T_rt at the lenient ends: 0.3, 7 dropped real targets at 200×200
     (100, 8000, 0.2, 4, 0.11, 5),
 )
-HANDOVER_BELOW_SNR = 1.6  # the multi-frame hand-over and the backfill are on in the presets below SNR 1.6 (docs/methods/sgds.md)
+HANDOVER_BELOW_SNR = 1.6  # the multi-frame hand-over is on in the presets below SNR 1.6 (docs/methods/sgds.md)
 # [1.6, 2): with 4000 particles in one 200- or 256-px block the 100-test suite at 200×200 gave
 # TSR 0.85 (SNR 1.6) and 0.93 (1.8); every failed run was a target never handed over (no false
 # track).  6000 per 150-px block (1.6: 24,000 at 200×200) and per 200-px block (1.8: 6,000)
@@ -98,9 +98,8 @@ class SGDSParams:
                                  "(0: Algorithm 2's uniform draw; the presets from SNR 1.6 up set 0)",
                                  unit="frames", source="not in the paper", low=0, high=50)
     backfill_frames: int = param(8, doc="a reported track's whole path begins up to this many frames before its "
-                                 "first, on the line through its first 20 points (0: off, as in the paper; the "
-                                 "presets from SNR 1.6 up set 0)", unit="frames", source="not in the paper", low=0,
-                                 high=50)
+                                 "first, on the line through its first 20 points (0: off, as in the paper; off "
+                                 "under a min_peak_z gate)", unit="frames", source="not in the paper", low=0, high=50)
     handover_jitter: float = param(0.3, doc="velocity spread added to the PP before the multi-frame hand-over",
                                    unit="px/frame", source="not in the paper", low=0)
     icef_window: int = param(10, doc="ICEF = 1 also when MTW/MSW's geometric mean over this many frames is ≥ "
@@ -133,7 +132,7 @@ class SGDSParams:
         if unknown:
             raise ParameterError(f"unknown SGDS-PF parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}")
         params = cls(snr=float(snr), L_ib=l_ib, N_sump=n_sump, T_PE=t_pe, T_PTp=t_ptp, T_ft=t_ft, T_rt=t_rt,
-                     **({} if snr < HANDOVER_BELOW_SNR else {"handover_frames": 0, "backfill_frames": 0}))
+                     **({} if snr < HANDOVER_BELOW_SNR else {"handover_frames": 0}))
         return replace(params, **overrides).validated()
 
     def icef_ratio_for(self, pixels: int, ratio: float | None = None) -> float:

@@ -44,9 +44,10 @@ from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
 from ..still_tracks import StillTrackRule
-from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, backfilled,
-                           held_compact, icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any,
-                           near_any_of, scef, update_confidence, windowed_icef, within_duplicate_radius)
+from .backfill import backfilled_paths
+from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
+                           icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
+                           update_confidence, windowed_icef, within_duplicate_radius)
 from ..registry import OneSequence
 from .params import SGDSParams
 from .handover import HANDOVER_STREAM, RecentFrames, engine_kernels, multi_frame_draws
@@ -65,7 +66,8 @@ class SGDSPF(OneSequence):
     ``update(frame)`` takes one raw frame and returns the confirmed tracks' rows for the frame
     it has just finished, which is two frames behind (saliency needs frame f + 2).
     ``finish()`` processes the last two frames and returns every confirmed track with its
-    whole path, which may begin before the track was confirmed (its history in the tracking PF).
+    whole path, which may begin before the track was confirmed (its history in the tracking PF) and, with
+    ``backfill_frames`` > 0, up to that many frames before its hand-over (backfill.py).
 
     ``history=False`` keeps no paths (only each track's last point) and no online rows, so memory
     stays constant on endless streams; then ``finish()`` returns only the rows of the two flushed
@@ -171,26 +173,24 @@ class SGDSPF(OneSequence):
         if "waiting" in self.stage_seconds:
             self._clock("waiting", t0)
 
-    def whole_paths(self) -> np.ndarray:
-        """Each reported track's whole path: from its first frame (before its confirmation) on, after up to
-        ``backfill_frames`` frames taken back along its first points' line (confirmation.backfilled; not with
-        ``min_peak_z`` > 0, whose gate judged the frames before too faint); with
+    def whole_paths(self, backfill: bool = True) -> np.ndarray:
+        """Each reported track's whole path: from its first frame (before its confirmation) on; with
         ``min_peak_z`` > 0, from the first to the last frame it was reported in (the gaps between filled), since
         the guard judges the stretches before and after as too faint to report, and with ``still_frames`` > 0
         not a still track that went before it had been reported in still_frames frames (methods/still_tracks.py;
-        docs/methods/sgds.md#real-video)."""
+        docs/methods/sgds.md#real-video).  With ``backfill`` (and ``backfill_frames`` > 0, history kept, no
+        ``min_peak_z`` gate) each path begins up to backfill_frames frames earlier (backfill.py)."""
         def kept(t: Track):
             if self.p.min_peak_z <= 0:
-                return t.path
+                return list(t.path)
             first, last = t.reported_span
-            return (row for row in t.path if first <= row[0] <= last)
+            return [row for row in t.path if first <= row[0] <= last]
 
-        def whole(t: Track):
-            path = list(kept(t))
-            return (backfilled(path, self.p.backfill_frames, self.shape) if self.p.min_peak_z <= 0 else []) + path
-
-        rows = [(f, t.track_id, x, y, vx, vy, i, c) for t in self.finished + self.active if t.whole
-                for (f, x, y, vx, vy, i, c) in whole(t)]
+        paths = {t.track_id: kept(t) for t in self.finished + self.active if t.whole}
+        frames = self.p.backfill_frames if backfill and self.history and self.p.min_peak_z <= 0 else 0
+        before = backfilled_paths(paths, frames, self.shape) if frames else {}
+        rows = [(f, track, x, y, vx, vy, i, c) for track, path in paths.items()
+                for (f, x, y, vx, vy, i, c) in before.get(track, []) + path]
         return make_table(rows, TRACK_DTYPE)
 
     def online(self) -> np.ndarray:
