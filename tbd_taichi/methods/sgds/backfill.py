@@ -3,8 +3,9 @@ first row, on the line through its first points.
 
 A potential target (PP) is handed over only once PTp > T_PTp (Algorithm 1), so the target was in view for several
 frames before its track's first row (and below SNR 1.6 the multi-frame hand-over, handover.py, has just weighed
-the PP's particles over the 8 frames before).  With (x̂0, v̂x) and (ŷ0, v̂y) the least-squares line through the path's first L = 20 points
-(constant velocity, Eq. 9 without noise; px, px/frame, frames counted from the first row f0), the backfilled rows are
+the PP's particles over the 8 frames before).  With (x̂0, v̂x) and (ŷ0, v̂y) the least-squares line through the
+path's first L = 20 points (constant velocity, Eq. 9 without noise; px, px/frame, frames counted from the first row
+f0), the backfilled rows are
 
     x(g) = x̂0 + (g − f0)·v̂x,   y(g) = ŷ0 + (g − f0)·v̂y,   g = f0 − K … f0 − 1,
 
