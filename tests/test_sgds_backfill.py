@@ -117,3 +117,11 @@ def test_no_backfill_under_the_peak_gate():
     tracker.p = replace(tracker.p, min_peak_z=0.0)
     rows = tracker.whole_paths()
     assert rows["frame"].tolist() == list(range(2, 30)) and rows["x"][0] == pytest.approx(6.0)
+
+
+@pytest.mark.parametrize("value", [-1, 51, 2.5])
+def test_a_bad_backfill_length_is_refused_before_tracking(value):
+    from tbd_taichi.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="backfill_frames"):
+        SGDSParams.for_snr(1.2, backfill_frames=value)
