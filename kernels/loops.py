@@ -3,6 +3,7 @@ import taichi as ti
 from taichi.lang import impl
 
 THREAD_SPAN = 512  # Taichi's CPU range-for gives each thread a run of at least this many iterations
+LIGHT_IR = "tbd_light_ir"  # the mark of :func:`light_ir` on Taichi's ``Kernel`` object
 
 
 def thread_span(serial: bool) -> int:
@@ -10,3 +11,13 @@ def thread_span(serial: bool) -> int:
     THREAD_SPAN on a CPU runtime, so that each unit starts a thread's run (a loop over a few dozen units
     would otherwise run on one thread), and 1 for serial loops and GPUs (one thread per unit)."""
     return 1 if serial or impl.current_cfg().arch not in (ti.x64, ti.arm64) else THREAD_SPAN
+
+
+def light_ir(kernel):
+    """Mark a ``@ti.kernel`` (put this decorator above it) to be compiled without Taichi's advanced IR passes
+    (``advanced_optimization=False`` for its compilation only; ``tbd_taichi.compile_speed`` applies the mark).
+    For the large kernels whose fields fix the frame size at compile time: there those passes took 70–85 % of
+    the machine-code build at each new frame size and the kernels ran as fast without them (docs/performance.md,
+    "A new frame size").  LLVM's own optimisation still runs; fast_math stays off, so the bits are the same."""
+    setattr(kernel._primal, LIGHT_IR, True)
+    return kernel

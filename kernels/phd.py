@@ -30,7 +30,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .loops import thread_span
+from .loops import light_ir, thread_span
 from .particles.layout import first_above
 from .rng import NormalTables, SharedTables, key_prefix, normals_at, table_field, uniform_at
 
@@ -129,6 +129,8 @@ class PhdKernels:
 
     # ------------------------------------------------------------------ propagate (Eqs. 1, 26, 28–34)
 
+    @light_ir
+
     @ti.kernel
     def propagate(self, seed: ti.u32, frame_key: ti.u32, total: ti.i32, backward: ti.i32, n_cells: ti.i32,
                   first_birth: ti.i32, n_births: ti.i32):
@@ -194,6 +196,8 @@ class PhdKernels:
 
     # ------------------------------------------------------------------ likelihood (Eqs. 4, 13, 17, 18)
 
+    @light_ir
+
     @ti.kernel
     def likelihood(self, first: ti.i32, count: ti.i32, half: ti.template(), psf_sigma: ti.f32,
                    masked: ti.template()):
@@ -249,6 +253,8 @@ class PhdKernels:
         return ti.Vector([0.5 * (e[k + 1] - e[k]) for k in ti.static(range(2 * half + 1))], dt=ti.f32)
 
     # ------------------------------------------------------------------ update (Eqs. 14–16, 19, 24)
+
+    @light_ir
 
     @ti.kernel
     def update(self, first_group: ti.i32, n_groups: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32,

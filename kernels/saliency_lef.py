@@ -5,6 +5,7 @@ The 5×5 correlation of Eq. 27 reads 0 outside the image.
 """
 import taichi as ti
 
+from .loops import light_ir
 from .saliency_fields import R_FRAME, R_MEMORY, R_MEMORY_SRC, R_SUM_A, R_SUM_B, R_SUM_C
 from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, frame_vector,
                              lane_shift, store_row_moments, sum_of_slots)
@@ -123,6 +124,9 @@ def accumulate_lef(f: ti.template(), zs: ti.i32, src: ti.i32, dst: ti.i32):
     from f.params32 (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
     multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, src, dst, f.ring_max, f.n_chunks,
                     f.r, f.serial)
+
+
+@light_ir
 
 
 @ti.kernel

@@ -8,6 +8,7 @@ pixels are ignored by the max filters and contribute 0 to the energy sum of Eq. 
 """
 import taichi as ti
 
+from .loops import light_ir
 from .saliency_fields import R_DST, R_FRAME, R_SUM_A, R_SUM_B, R_SUM_C
 from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, lane_shift,
                              positive_row_vector, row_vector, store_row_moments, sum_of_slots)
@@ -166,6 +167,7 @@ def first_layer_rows(c: ti.i32, y: ti.i32, y0: ti.i32, y1: ti.i32, args: ti.temp
         column_max(ring, c, y - r, h, args['acc_max'], ds, args['valid'], r)
 
 
+@light_ir
 @ti.kernel
 def accumulate_max(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32):
     """One launch of :func:`first_layer_sum`: I_acc of se_max slots ring[R_SUM_*] into f.acc[ring[R_DST]], its max
@@ -173,6 +175,9 @@ def accumulate_max(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1
     :func:`~.saliency_fields.ring_slots`)."""
     first_layer_sum(f.se_max, ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C], scale, f.valid, f.acc, ring[R_DST],
                     f.line, f.ring_max, f.acc_max, f.n_chunks, f.r, f.serial)
+
+
+@light_ir
 
 
 @ti.kernel

@@ -4,6 +4,7 @@ proposal, copied sparsely to host arrays.
 """
 import taichi as ti
 
+from .loops import light_ir
 from .saliency_lanes import LANES, NEG_INF, ROW_BLOCK
 from .saliency_lef import correlate_d, lef_log_weight
 
@@ -189,6 +190,9 @@ def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written
         for i in range(best.shape[0]):
             best_out[i, 0] = best[i, 0]
             best_out[i, 1] = best[i, 1]
+
+
+@light_ir
 
 
 @ti.kernel

@@ -21,9 +21,10 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "0")
 import taichi as ti  # noqa: E402
 
 from .errors import BackendError  # noqa: E402
-from . import compile_speed  # noqa: E402
+from . import compile_speed, light_ir  # noqa: E402
 
 compile_speed.install()  # before any kernel module is imported (its decorators run at import)
+light_ir.install()  # the kernels marked light_ir compile without Taichi's advanced IR passes
 
 ARCH_NAMES = ("cpu", "cuda", "vulkan", "metal", "gpu", "auto")
 # compiled kernels kept on disk; Taichi's default 100 MiB evicts kernels that a test run, or a

@@ -6,6 +6,7 @@ from functools import lru_cache
 
 import taichi as ti
 
+from ..loops import light_ir
 from ..rng import key_prefix
 from .layout import BIRTH_STREAMS, NOISE_STREAMS, S_EXIST, S_RESAMPLE, S_RESAMPLE_END, S_SYSTEMATIC
 
@@ -30,6 +31,8 @@ class StepOptions:
 class StepMixin:
     """The fused steps, composed of the stages of ``PropagateMixin``, ``WeightMixin``, ``ResampleMixin`` and
     ``EstimateMixin``."""
+
+    @light_ir
 
     @ti.kernel
     def step(self, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -77,6 +80,8 @@ class StepMixin:
         self.for_tiles(self.resampled_tile, {'systematic': systematic, 'b': b,
                                              'key': key_prefix(seed, frame, S_SYSTEMATIC)})
         self.commit_counts()
+
+    @light_ir
 
     @ti.kernel
     def step_pair(self, other: ti.template(), frame: ti.i32, b: ti.i32, other_b: ti.i32,
