@@ -74,10 +74,17 @@ def table_field(values: np.ndarray, dtype):
 
 def table_fields(*tables) -> tuple:
     """1-D fields holding each (values, dtype) of ``tables``, filled by one kernel
-    (``transfer.arrays_to_fields``; ``from_numpy`` compiles one kernel per field)."""
+    (``transfer.arrays_to_fields``; ``from_numpy`` compiles one kernel per field).  The fields form an SNode tree
+    of their own: in the tree of fields made before them (a particle pool's, sized by the frame) their place would
+    depend on the frame size, and so would every kernel that reads them, which would then compile again at each
+    new frame size."""
     from .transfer import arrays_to_fields
 
-    fields = tuple(ti.field(dtype, values.shape[0]) for values, dtype in tables)
+    builder = ti.FieldsBuilder()
+    fields = tuple(ti.field(dtype) for _, dtype in tables)
+    for field, (values, _) in zip(fields, tables):
+        builder.dense(ti.i, values.shape[0]).place(field)
+    builder.finalize()
     sizes = [values.shape[0] for values, _ in tables]
     offsets = tuple(int(v) for v in np.cumsum([0] + sizes[:-1]))
     arrays_to_fields(np.concatenate([np.asarray(values, np.float64) for values, _ in tables]), fields, offsets)

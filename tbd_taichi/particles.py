@@ -151,7 +151,8 @@ class ParticlePool:
             "gt0": gt0, "gt1": gt1,
             # C_* (f64 here: the Taichi field rounds to f32 as a scalar argument would, the NumPy twin keeps them)
             "constants": np.array([q1, q2, intensity_floor, psf_sigma, noise_sigma], np.float64),
-            "seed_key": np.array([self.seed], np.uint32), **self.params, "kind": self.kinds}
+            "seed_key": np.array([self.seed], np.uint32), "frame_hw": np.array(self.frame_shape, np.int32),
+            **self.params, "kind": self.kinds}
         backend.from_host_many(self.k, self._setup)
         if not fresh:  # reused fields (new Taichi fields are zeros); best_e: each group's largest E = 1 log-weight
             backend.zero_many(self.k, ("x", "vx", "y", "vy", "inten", "e", "tp", "seq", "logw", "born", "best_e"))

@@ -92,6 +92,8 @@ class LayoutMixin:
         self.gmax, self.gmax_e, self.gtotal = f32(g), f32(g), f64(g)
         self.best_e = f32(g)  # gmax_e of the last weigh (``estimates``' M_BEST column)
         self.constants, self.seed_key = f32(N_CONSTANTS), ti.field(ti.u32, shape=1)  # C_* columns; the random key
+        self.frame_hw = i32(2)  # (H, W), px: a field, so that a pool whose fields do not grow with the frame (the
+        # tracking PFs') compiles its kernels once for every frame size
         self.gt0, self.gt1, self.gspc = i32(g), i32(g), f64(g)
         self.tile_start, self.tile_group = i32(n_tiles), i32(n_tiles)
         self.tile_max, self.tile_max_e, self.tile_total, self.tile_prefix = f32(n_tiles), f32(n_tiles), \
@@ -105,9 +107,9 @@ class LayoutMixin:
     @ti.func
     def step_values(self, frame: ti.i32, b: ti.i32):
         """The values every stage of a step reads, as the stages take them: (seed, frame, b, q1, q2, I_floor, W, H,
-        Σ, σ), the pool's ``constants`` and ``seed_key`` with the frame index and the current buffer b (W and H,
-        px, are the frame's shape, fixed at compile time)."""
-        h, w = ti.static(self.frame_shape)
+        Σ, σ), the pool's ``constants``, ``seed_key`` and ``frame_hw`` (W and H, px) with the frame index and the
+        current buffer b."""
+        h, w = self.frame_hw[0], self.frame_hw[1]
         c = ti.static(self.constants)
         return (self.seed_key[0], frame, b, c[C_Q1], c[C_Q2], c[C_I_FLOOR], w, h, c[C_PSF_SIGMA],
                 c[C_NOISE_SIGMA])

@@ -189,7 +189,7 @@ class StepMixin:
         seed, frame, b, q1, q2, i_floor, width, height, psf_sigma, noise_sigma = loop['values']
         inv2s2, norm, inv_var, step = self.likelihood.constants(psf_sigma, noise_sigma)
         self.tile_maximum(t, {'b': b, 'weigh': True,
-                              'args': {'values': (b, inv2s2, norm, inv_var, step), 'zp': loop['z']}})
+                              'args': {'values': (b, inv2s2, norm, inv_var, step, height, width), 'zp': loop['z']}})
 
     @ti.func
     def weighted_tile(self, t: ti.i32, loop: ti.template()):

@@ -19,7 +19,7 @@ class WeightMixin:
         come from two exponentials by a ratio recurrence (the likelihood model ``self.likelihood``).  ``zp``: the
         frame with a zero border of PAD pixels (H + 2·PAD, W + 2·PAD)."""
         inv2s2, norm, inv_var, step = self.likelihood.constants(psf_sigma, noise_sigma)
-        values = (b, inv2s2, norm, inv_var, step)
+        values = (b, inv2s2, norm, inv_var, step, self.frame_hw[0], self.frame_hw[1])
         if ti.static(self.flat):
             self.for_slots(False, self.no_group_values, self.store_log_weight, {'values': values, 'zp': zp})
             self.tile_maxima(b, False, ())
@@ -34,10 +34,10 @@ class WeightMixin:
     @ti.func
     def log_weight(self, i: ti.i32, args: ti.template()) -> ti.f32:
         """Eq. 15's log-weight of slot i (0 for E = 0); ``args``: {'values': the constants of
-        ``log_weights``, 'zp': the bordered frame} (a dict: a tuple made in a kernel cannot hold an array)."""
-        b, inv2s2, norm, inv_var, step = args['values']
+        ``log_weights`` and the frame's H and W (px), 'zp': the bordered frame} (a dict: a tuple made in a kernel
+        cannot hold an array)."""
+        b, inv2s2, norm, inv_var, step, h, w = args['values']
         zp = ti.static(args['zp'])
-        h, w = ti.static(self.frame_shape)
         lw = ti.f32(0.0)
         if self.e[b, i] == 1:
             lw = self.likelihood.log_ratio(self.x[b, i], self.y[b, i], self.inten[b, i], zp,

@@ -42,6 +42,7 @@ class NumpyParticleKernels:
         # them rounded to f32)
         self.constants, self.seed_key = np.zeros(N_CONSTANTS), np.zeros(1, np.uint32)
         self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
+        self.frame_hw = np.array(self.frame_shape, np.int32)  # (H, W) as the Taichi pool holds it
         self.gtotal, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
         self.tile_max, self.tile_max_e = np.zeros(n_tiles, F32), np.zeros(n_tiles, F32)
