@@ -20,6 +20,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from .loops import light_ir
 from .rng import NormalTables, key_prefix, normals_at
 
 FEATURES = 3  # grey, edge, Gabor
@@ -212,6 +213,7 @@ class FeatureFusionKernels:
 
     # ------------------------------------------------------------------ Eqs. 6, 10, 23
 
+    @light_ir
     @ti.kernel
     def step(self, seed: ti.u32, frame: ti.i32, out: ti.types.ndarray(dtype=ti.f64, ndim=1), serial: ti.template()):
         """One frame in one launch (:meth:`frame_step`); ``serial``: all of it in the launching thread

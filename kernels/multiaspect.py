@@ -26,7 +26,7 @@ count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot
 import numpy as np
 import taichi as ti
 
-from .loops import thread_span
+from .loops import light_ir, thread_span
 from .phd import ERF_END, SQRT_HALF, ErfTable, erf
 from .multiaspect_resampling import S_DRAW, STATE, SUM_ABSENT, SUM_ASPECT, SUM_VX, SUM_VY, SUM_X, SUM_Y  # noqa: F401
 from .multiaspect_resampling import MultiaspectResampling
@@ -212,6 +212,7 @@ class MultiaspectKernels(MultiaspectResampling):
         for i in range(N_LAW):
             self.law[i] = law[i]
 
+    @light_ir
     @ti.kernel
     def propagate(self, seed: ti.u32, frame: ti.i32, stage: ti.i32, from_ancestor: ti.i32, coupled: ti.i32,
                   data_births: ti.i32, p_a: ti.f32, side: ti.i32, move: ti.i32):

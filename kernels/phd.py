@@ -130,7 +130,6 @@ class PhdKernels:
     # ------------------------------------------------------------------ propagate (Eqs. 1, 26, 28–34)
 
     @light_ir
-
     @ti.kernel
     def propagate(self, seed: ti.u32, frame_key: ti.u32, total: ti.i32, backward: ti.i32, n_cells: ti.i32,
                   first_birth: ti.i32, n_births: ti.i32):
@@ -197,7 +196,6 @@ class PhdKernels:
     # ------------------------------------------------------------------ likelihood (Eqs. 4, 13, 17, 18)
 
     @light_ir
-
     @ti.kernel
     def likelihood(self, first: ti.i32, count: ti.i32, half: ti.template(), psf_sigma: ti.f32,
                    masked: ti.template()):
@@ -255,7 +253,6 @@ class PhdKernels:
     # ------------------------------------------------------------------ update (Eqs. 14–16, 19, 24)
 
     @light_ir
-
     @ti.kernel
     def update(self, first_group: ti.i32, n_groups: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32,
                miss: ti.f32, radius: ti.f32):

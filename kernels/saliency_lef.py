@@ -127,8 +127,6 @@ def accumulate_lef(f: ti.template(), zs: ti.i32, src: ti.i32, dst: ti.i32):
 
 
 @light_ir
-
-
 @ti.kernel
 def second_layer_and_lef(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32,
                          accumulated: ti.template()):

@@ -178,8 +178,6 @@ def accumulate_max(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1
 
 
 @light_ir
-
-
 @ti.kernel
 def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), f: ti.template(),
                          ring: ti.types.ndarray(dtype=ti.i32, ndim=1), scale: ti.f32, keep_i_se: ti.template()):

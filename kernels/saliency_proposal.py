@@ -193,8 +193,6 @@ def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written
 
 
 @light_ir
-
-
 @ti.kernel
 def proposal_from_candidates(f: ti.template(), zs: ti.i32, ms: ti.i32, accumulated: ti.template(),
                              proposal_out: ti.types.ndarray(dtype=ti.f32, ndim=2),

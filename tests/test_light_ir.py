@@ -8,7 +8,7 @@ from taichi.lang import impl
 
 import tbd_taichi
 from tbd_taichi import light_ir
-from tbd_taichi.kernels import phd, saliency
+from tbd_taichi.kernels import feature_fusion, multiaspect, phd, saliency
 from tbd_taichi.kernels.loops import LIGHT_IR
 from tbd_taichi.kernels.loops import light_ir as mark
 from tbd_taichi.kernels.particles import step as particle_step
@@ -16,7 +16,8 @@ from tbd_taichi.kernels.populations import PopulationKernels
 
 MARKED = [particle_step.StepMixin.step, particle_step.StepMixin.step_pair, saliency.frame_to_first_layer,
           saliency.accumulate_max, saliency.second_layer_and_lef, saliency.proposal_from_candidates,
-          phd.PhdKernels.propagate, phd.PhdKernels.likelihood, phd.PhdKernels.update]
+          phd.PhdKernels.propagate, phd.PhdKernels.likelihood, phd.PhdKernels.update,
+          feature_fusion.FeatureFusionKernels.step, multiaspect.MultiaspectKernels.propagate]
 
 
 @pytest.fixture(autouse=True)

@@ -33,7 +33,6 @@ class StepMixin:
     ``EstimateMixin``."""
 
     @light_ir
-
     @ti.kernel
     def step(self, frame: ti.i32, b: ti.i32, counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
              n_out: ti.types.ndarray(dtype=ti.i32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
@@ -82,7 +81,6 @@ class StepMixin:
         self.commit_counts()
 
     @light_ir
-
     @ti.kernel
     def step_pair(self, other: ti.template(), frame: ti.i32, b: ti.i32, other_b: ti.i32,
                   counts: ti.types.ndarray(dtype=ti.i32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
