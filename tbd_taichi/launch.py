@@ -33,6 +33,8 @@ import numpy as np
 import taichi as ti
 from taichi.types import template
 
+from .light_ir import compile_setting
+
 SCALAR_KEYS = (bool, int, float, str)  # template values that key a compiled kernel by value
 INTS = (int, np.integer)
 FLOATS = (float, int, np.floating, np.integer)
@@ -182,7 +184,8 @@ class FastKernel:
             if key is not None and self._keeps(runtime):
                 kernel_cpp = self.kernel.compiled_kernels[self.kernel.ensure_compiled(*self.lead, *args)]
                 prog = runtime.prog
-                data = prog.compile_kernel(prog.config(), prog.get_device_caps(), kernel_cpp)
+                with compile_setting(self.kernel):  # the build Taichi's launch made (light IR or not)
+                    data = prog.compile_kernel(prog.config(), prog.get_device_caps(), kernel_cpp)
                 templates = tuple(v for (kind, _), v in zip(self.kinds, args) if kind == "t")
                 self.compiled[key] = (prog, kernel_cpp, data, templates)
         except (AttributeError, KeyError, TypeError):  # Taichi's kernel internals differ: its own launch from now on

@@ -1,12 +1,16 @@
 """Kernels compiled without Taichi's advanced IR passes: the ones marked by ``kernels.loops.light_ir``.
 
-Taichi compiles a kernel at its first launch (``Kernel.launch_kernel``) with the runtime's compile config, and keys
-both its in-memory and its offline cache on that config.  :func:`install` wraps the launch so that a marked
-kernel's launches see ``advanced_optimization=False`` (and the config as it was afterwards): the kernel is built,
-cached and found again under that setting in every process, while every other kernel keeps Taichi's default.
-On the CPU backends only: the effect was measured there, and a GPU build keeps Taichi's default.
-``backend.init`` installs it.  Why and which kernels: ``kernels.loops.light_ir``."""
+Taichi compiles a kernel at its first launch (``Kernel.launch_kernel``) with the runtime's compile config; the
+offline cache's key holds that config (Taichi 1.7 computes a kernel's key once and keeps it on the kernel, so a
+later ``compile_kernel`` of the same kernel finds the same build).  :func:`install` wraps the launch, and
+``launch.FastKernel`` its own look-up, in :func:`compile_setting`: a marked kernel is built, cached and found again
+with ``advanced_optimization=False`` in every process, and the config is as it was afterwards; every other kernel
+keeps Taichi's default.  On the CPU backends only: the effect was measured there, and a GPU build keeps Taichi's
+default.  ``tbd_taichi.backend`` installs it when it is imported.  Why and which kernels:
+``kernels.loops.light_ir``."""
 from __future__ import annotations
+
+import contextlib
 
 import taichi as ti
 
@@ -14,6 +18,27 @@ from .kernels.loops import LIGHT_IR
 
 CPU_ARCHS = (ti.x64, ti.arm64)  # where the mark applies (measured there; GPU backends keep Taichi's default)
 _ORIGINAL: dict = {}  # "launch_kernel" -> the launch wrapped, while installed
+
+
+@contextlib.contextmanager
+def compile_setting(kernel):
+    """The compile config as ``kernel`` (Taichi's ``Kernel``) is built and looked up under: for a marked kernel on
+    a CPU backend, ``advanced_optimization=False`` inside the block and the runtime's setting again after it; for
+    any other kernel the config as it is.  Every ``compile_kernel`` of a marked kernel runs inside it (Taichi's
+    launch through :func:`install`, ``launch.FastKernel``'s look-up), so the kernel is never built or found under
+    the other setting."""
+    from taichi.lang import impl
+
+    config = impl.current_cfg()
+    if not getattr(kernel, LIGHT_IR, False) or config.arch not in CPU_ARCHS:
+        yield
+        return
+    before = config.advanced_optimization
+    config.advanced_optimization = False
+    try:
+        yield
+    finally:
+        config.advanced_optimization = before
 
 
 def install() -> bool:
@@ -29,16 +54,8 @@ def install() -> bool:
         return False
 
     def launch_kernel(self, t_kernel, *args):
-        launch = _ORIGINAL["launch_kernel"]
-        config = impl.current_cfg()
-        if not getattr(self, LIGHT_IR, False) or config.arch not in CPU_ARCHS:
-            return launch(self, t_kernel, *args)
-        before = config.advanced_optimization
-        config.advanced_optimization = False
-        try:
-            return launch(self, t_kernel, *args)
-        finally:
-            config.advanced_optimization = before
+        with compile_setting(self):
+            return _ORIGINAL["launch_kernel"](self, t_kernel, *args)
 
     _ORIGINAL["launch_kernel"] = Kernel.launch_kernel
     Kernel.launch_kernel = launch_kernel

@@ -1,7 +1,10 @@
 """A particle pool whose fields do not grow with the frame (the tracking PFs') compiles its kernels once for every
 frame size: a second process at another frame size finds all of them in Taichi's offline cache and writes no new
-kernel file.  Before the pools read the frame size from a field (and the shared random tables had an SNode tree of
-their own) the step compiled again at each size."""
+kernel file.  As in SGDS-PF, fields sized by the frame are made first (there: the searching pool's), then the shared
+random tables and the pool.  Before the pools read the frame size from a field, and before the shared tables had an
+SNode tree of their own (they shared the tree of the fields made before them), the step compiled again at each
+size; each of the two fails this test alone.  A marked (light IR) kernel launched through the lean path is built
+once, under the light setting: one kernel file, the one Taichi's own launch writes, not the unmarked kernel's."""
 import os
 import subprocess
 import sys
@@ -12,10 +15,14 @@ ROOT = Path(__file__).resolve().parents[1]
 POOL_AT_SIZE = """
 import sys
 import numpy as np
+import taichi as ti
 import tbd_taichi
+from tbd_taichi.kernels.rng import ExponentialTables, NormalTables
 from tbd_taichi.particles import ParticlePool
 h, w = int(sys.argv[1]), int(sys.argv[2])
 tbd_taichi.init("cpu")
+frame_sized = ti.field(ti.f32, shape=(h, w))  # fields made first, sized by the frame (SGDS-PF: the searching pool's)
+NormalTables.shared(), ExponentialTables.shared()
 pool = ParticlePool([600] * 3, (h, w), seed=1)
 pool.configure_groups(np.arange(3), "copy", vmax=1.0, intensity=(1.0, 3.0))
 z = np.random.default_rng(0).standard_normal((h, w)).astype(np.float32)
@@ -29,12 +36,47 @@ def cache_files(path: Path) -> set:
     return {str(p.relative_to(path)) for p in path.rglob("*") if p.is_file()}
 
 
-def run_pool(cache: Path, shape) -> None:
-    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache), PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", POOL_AT_SIZE, *map(str, shape)], env=env, cwd=ROOT,
+MARKED_KERNEL = """
+import sys
+import numpy as np
+import taichi as ti
+import tbd_taichi
+from tbd_taichi.kernels.loops import light_ir
+from tbd_taichi.launch import Launcher
+
+@ti.kernel
+def scaled(out: ti.types.ndarray(dtype=ti.f32, ndim=1), k: ti.f32):
+    for i in range(out.shape[0]):
+        out[i] = ti.exp(-ti.cast(i, ti.f32) * k)
+
+if sys.argv[1] != "unmarked":
+    scaled = light_ir(scaled)
+tbd_taichi.init("cpu")
+out = np.zeros(9, np.float32)
+launch = Launcher(sys.modules[__name__]).scaled if sys.argv[1] == "lean" else scaled
+for k in (0.5, 0.25, 0.125):
+    launch(out, k)
+print(int(out[1] == np.float32(np.exp(np.float32(-0.125)))))
+"""
+
+
+def run_script(cache: Path, script: str, *args) -> None:
+    path = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=str(cache), PYTHONPATH=path)
+    file = cache.parent / f"script_{abs(hash(script))}.py"  # a file: Taichi reads a kernel's source from it
+    file.write_text(script)
+    out = subprocess.run([sys.executable, str(file), *map(str, args)], env=env, cwd=ROOT,
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().endswith("1")
+
+
+def run_pool(cache: Path, shape) -> None:
+    run_script(cache, POOL_AT_SIZE, *shape)
+
+
+def kernel_files(path: Path) -> set:
+    return {name for name in cache_files(path) if name.endswith(".tic")}
 
 
 def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
@@ -42,5 +84,14 @@ def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
     first = cache_files(tmp_path)
     assert any(name.endswith(".tic") for name in first), sorted(first)  # the cache is where we look
     run_pool(tmp_path, (61, 37))
-    new = {name for name in cache_files(tmp_path) - first if name.endswith(".tic")}
+    new = kernel_files(tmp_path) - first
     assert not new, f"kernels compiled again at a new frame size: {sorted(new)}"
+
+
+def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it(tmp_path):
+    builds = {mode: tmp_path / mode for mode in ("lean", "plain", "unmarked")}
+    for mode, cache in builds.items():
+        run_script(cache, MARKED_KERNEL, mode)
+    lean, plain, unmarked = (kernel_files(cache) for cache in builds.values())
+    assert len(lean) == 1 and lean == plain
+    assert lean != unmarked  # the light build is another build (the offline cache keys on the setting)

@@ -5,8 +5,8 @@ A likelihood model has
 * ``constants(psf_sigma, noise_sigma)``: its constants, computed once per launch;
 * ``log_ratio(x, y, inten, zp, constants, h, w)``: the log-likelihood ratio (target present against noise
   alone) of one E = 1 particle at (x, y) px with intensity ``inten`` on the normalised frame ``zp``, which has a
-  zero border of ``PAD`` pixels ((h + 2·PAD, w + 2·PAD); h, w the frame's size: compile-time constants in the
-  particle kernels, run-time values in ``kernels/handover.py``).
+  zero border of ``PAD`` pixels ((h + 2·PAD, w + 2·PAD); h, w the frame's size, run-time values: the pool's
+  ``frame_hw`` field in the particle kernels, arguments in ``kernels/handover.py``).
 
 The pool keeps what is not the model's: log-weight 0 for E = 0 particles, the maxima and the normalisation.
 

@@ -75,7 +75,8 @@ class LayoutMixin:
                  flat: bool, split: int = 1):
         c, g = capacity, n_groups
         self.capacity, self.serial, self.flat, self.split = capacity, serial, flat, split
-        self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
+        # frame_shape is not kept: the kernels read the frame's size from frame_hw at run time, so that a pool whose
+        # fields do not grow with the frame compiles once for every size (populations sizes pixel_key by it)
         self.tiles_by_group = n_groups >= 2 * split  # for_tiles deals out whole groups (else single tiles)
         f32 = lambda *shape: ti.field(ti.f32, shape=shape)  # noqa: E731
         i32 = lambda *shape: ti.field(ti.i32, shape=shape)  # noqa: E731
