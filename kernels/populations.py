@@ -264,6 +264,8 @@ class PopulationKernels:
 class SearchingKernels(ParticleKernels, PopulationKernels):
     """The particle pool's kernels with Eqs. 36–38 on its fields: SGDS-PF's searching PFs."""
 
+    FIELDS_SIZED_BY_FRAME = True  # pixel_key has the frame's shape
+
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
                  flat: bool, split: int = 1, motion=None, likelihood=None):
         super().__init__(capacity, n_groups, n_tiles, frame_shape, map_capacity, serial, flat, split, motion,

@@ -131,7 +131,8 @@ class ParticlePool:
         if engine == "taichi":
             from .launch import Launcher
 
-            fields = backend.reusable(self, (Kernels.__name__,) + dims, lambda: Kernels(*dims))
+            shapes = dims if getattr(Kernels, "FIELDS_SIZED_BY_FRAME", True) else dims[:3] + dims[4:]
+            fields = backend.reusable(self, (Kernels.__name__,) + shapes, lambda: Kernels(*dims))
             self.k, fresh = Launcher(fields), not backend.holds_old_values(fields)
         else:
             self.k, fresh = Kernels(*dims), False

@@ -713,3 +713,40 @@ def test_the_kernels_hold_the_hosts_live_counts_after_every_operation(rng, engin
     s.eliminate_and_hand_over(pp, [40, 25], [10, 5], [0.5, 0.5], index, 0.0, 0.0, [], 1.0, 1)
     np.testing.assert_array_equal(s._get("n"), s.counts, err_msg="eliminate_and_hand_over")
     assert s.counts.sum() < 65 and len(checks) == 7
+
+
+def test_a_pool_at_another_frame_size_reuses_a_finished_pools_fields_and_weighs_at_its_own_size(rng):
+    """A tracking-style pool's fields do not follow the frame (its kernels read frame_hw), so a pool at another
+    size takes the fields of a finished one; it must predict and weigh at its own size, as the NumPy twin does (the
+    first pool's frame is 40 px wide, the second's 51: particles at x > 40 live and are weighed)."""
+    import gc
+
+    from tbd_taichi import backend
+
+    tbd_taichi.init(TEST_ARCH)
+    caps, shape = [700, 700], (23, 51)
+    first = ParticlePool(caps, (30, 40), seed=11)
+    fields = first.k._target
+    del first
+    gc.collect()
+    states = random_states(rng, caps, shape)
+    z = rng.standard_normal(shape).astype(np.float32)
+    z[5:8, 45:48] += 3.0  # a bright spot where only the new frame has pixels
+    pools = []
+    for engine in ("taichi", "numpy"):
+        pool = ParticlePool(caps, shape, engine=engine, seed=11)
+        pool.configure_groups([0, 1], "uniform", pb=0.3, pd=0.05, vmax=1.5, intensity=(1.0, 4.0))
+        pool.set_state(states)
+        pool.load_frame(z)
+        pools.append(pool)
+    reused, twin = pools
+    assert reused.k._target is fields and backend.holds_old_values(fields)
+    for frame in range(3):
+        for pool in pools:
+            pool.predict(frame)
+        assert_states_match(reused, twin)
+        for pool in pools:
+            pool.weigh()
+        assert_states_match(reused, twin, rtol=2e-5, atol=2e-5)  # f32 exp differs by ulps
+    s = reused.state()
+    assert ((s["x"] > 40) & (s["e"] == 1) & (s["logw"] != 0)).any()
