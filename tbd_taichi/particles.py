@@ -127,11 +127,13 @@ class ParticlePool:
             split = tile_threads(self.capacity, len(tiles), flat)
         Kernels = self._kernels_class(engine)
         self.split = split  # threads sharing the tile loops (kernels.particles.ParticleKernels.for_tiles)
-        dims = (self.capacity, self.n_groups, len(tiles), self.frame_shape, self.map_capacity, serial, flat, split)
+        sizes, layout = (self.capacity, self.n_groups, len(tiles)), (self.map_capacity, serial, flat, split)
+        dims = sizes + (self.frame_shape,) + layout  # the Kernels' arguments
         if engine == "taichi":
             from .launch import Launcher
 
-            shapes = dims if getattr(Kernels, "FIELDS_SIZED_BY_FRAME", True) else dims[:3] + dims[4:]
+            # the frame's shape keys a reused set only where a field has it (kernels read frame_hw)
+            shapes = dims if getattr(Kernels, "FIELDS_SIZED_BY_FRAME", True) else sizes + layout
             fields = backend.reusable(self, (Kernels.__name__,) + shapes, lambda: Kernels(*dims))
             self.k, fresh = Launcher(fields), not backend.holds_old_values(fields)
         else:

@@ -11,20 +11,22 @@ class WeightMixin:
     """Steps 3–4 over the pool (Eqs. 14–17)."""
 
     @ti.func
-    def log_weights(self, b: ti.i32, psf_sigma: ti.f32, noise_sigma: ti.f32, zp: ti.template()):
+    def log_weights(self, values: ti.template(), zp: ti.template()):
         """Step 3, Eq. 15 in the log domain: for E = 1,
         log ω̃ = Σ_{5×5} h(2z − h)/(2σ²) with h = I/(2πΣ²)·exp(−((i−x)² + (j−y)²)/(2Σ²)) (Eq. 14),
         over the in-image pixels of the 5×5 window around (⌊x+½⌋, ⌊y+½⌋); 0 for E = 0.
         The Gaussian is separable, h = a·gx·gy, so Σh² = a²·Σgx²·Σgy²; each axis's five samples
-        come from two exponentials by a ratio recurrence (the likelihood model ``self.likelihood``).  ``zp``: the
-        frame with a zero border of PAD pixels (H + 2·PAD, W + 2·PAD)."""
+        come from two exponentials by a ratio recurrence (the likelihood model ``self.likelihood``).  ``values``:
+        ``step_values`` (the buffer b, the frame's W and H, Σ and σ); ``zp``: the frame with a zero border of PAD
+        pixels (H + 2·PAD, W + 2·PAD)."""
+        b, width, height, psf_sigma, noise_sigma = values[2], values[6], values[7], values[8], values[9]
         inv2s2, norm, inv_var, step = self.likelihood.constants(psf_sigma, noise_sigma)
-        values = (b, inv2s2, norm, inv_var, step, self.frame_hw[0], self.frame_hw[1])
+        weighing = (b, inv2s2, norm, inv_var, step, height, width)
         if ti.static(self.flat):
-            self.for_slots(False, self.no_group_values, self.store_log_weight, {'values': values, 'zp': zp})
+            self.for_slots(False, self.no_group_values, self.store_log_weight, {'values': weighing, 'zp': zp})
             self.tile_maxima(b, False, ())
         else:  # the tile maxima of step 4 in the same pass (one pass over the pool fewer)
-            self.tile_maxima(b, True, {'values': values, 'zp': zp})
+            self.tile_maxima(b, True, {'values': weighing, 'zp': zp})
 
     @ti.func
     def store_log_weight(self, i: ti.i32, g: ti.i32, _: ti.template(), args: ti.template()):
@@ -158,8 +160,7 @@ class WeightMixin:
         """Steps 3–4 on the normalised frame z (zero-bordered: H + 2·PAD, W + 2·PAD): log-weights
         (Eq. 15), their normalisation, and each group's largest E = 1 log-weight into ``best_e``;
         ``values``: ``step_values``."""
-        b, psf_sigma, noise_sigma = values[2], values[8], values[9]
-        self.log_weights(b, psf_sigma, noise_sigma, z)
+        self.log_weights(values, z)
         self.normalise_weights()
         self.keep_best()
 

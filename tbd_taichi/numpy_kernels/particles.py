@@ -41,8 +41,7 @@ class NumpyParticleKernels:
         # f64: the host's values exactly, which the NumPy steps use as Python floats (as the Taichi kernels take
         # them rounded to f32)
         self.constants, self.seed_key = np.zeros(N_CONSTANTS), np.zeros(1, np.uint32)
-        self.frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
-        self.frame_hw = np.array(self.frame_shape, np.int32)  # (H, W) as the Taichi pool holds it
+        self.frame_hw = np.array(frame_shape, np.int32)  # (H, W), written again by the pool's set-up, as in Taichi
         self.gtotal, self.map_total, self.gspc = np.zeros(g), np.zeros(g), np.zeros(g)
         self.tile_start, self.tile_group = np.zeros(n_tiles, np.int32), np.zeros(n_tiles, np.int32)
         self.tile_max, self.tile_max_e = np.zeros(n_tiles, F32), np.zeros(n_tiles, F32)
@@ -56,9 +55,9 @@ class NumpyParticleKernels:
 
     def step_values(self) -> tuple:
         """(seed, q1, q2, I_floor, W, H, Σ, σ): the pool's ``constants`` (as Python floats) and ``seed_key`` and the
-        frame's shape."""
+        frame's shape (``frame_hw``)."""
         c = [float(v) for v in self.constants]
-        h, w = self.frame_shape
+        h, w = (int(v) for v in self.frame_hw)
         return (int(self.seed_key[0]), c[C_Q1], c[C_Q2], c[C_I_FLOOR], w, h, c[C_PSF_SIGMA], c[C_NOISE_SIGMA])
 
     def live_slots(self) -> np.ndarray:
