@@ -59,7 +59,7 @@ def main() -> None:
         if f >= 10:
             separate.append(t_mid - t0)
             paired.append(t_end - t_mid)
-    print(f"paired in one launch: {s2._pairs_with(t2)} (split over {s2.split} thread(s))")
+    print(f"paired in one launch: {s2.pairs_with(t2)} (split over {s2.split} thread(s))")
     print(f"two steps + estimates {statistics.median(separate) * 1e3:.3f} ms, step_with "
           f"{statistics.median(paired) * 1e3:.3f} ms (median of {args.frames} frames, {args.tracks} live tracks)")
 

@@ -27,17 +27,25 @@ N_PP_SUMS = 5
 RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, T, then the T tracked (x, y)
 
 
+def pixel_class(frame_shape) -> int:
+    """Entries of a per-pixel table for frames of ``frame_shape`` (H, W): H·W rounded up to a power of two, so
+    that frames of one size class share the table's shape, and with it the compiled kernels (the kernels read
+    the frame's size from ``frame_hw``)."""
+    return 1 << max(int(frame_shape[0]) * int(frame_shape[1]) - 1, 1).bit_length()
+
+
 @ti.data_oriented
 class PopulationKernels:
     """Eqs. 37–38 over the pool; needs the ``ParticleKernels`` fields and :meth:`population_fields`."""
 
     def population_fields(self, capacity: int, frame_shape):
         """Scratch kept between eliminate and hand_over: per state index the PP and keep flag, per PP
-        its size, quota and running remainder, per pixel the index image's precedence."""
+        its size, quota and running remainder, per pixel the index image's precedence (``pixel_class`` entries,
+        pixel y·W + x)."""
         self.state_pp, self.state_keep = ti.field(ti.i32, capacity), ti.field(ti.i8, capacity)
         self.pp_size, self.pp_take, self.pp_acc = ti.field(ti.i32, capacity), ti.field(ti.i32, capacity), \
             ti.field(ti.i32, capacity)
-        self.pixel_key = ti.field(ti.i64, shape=frame_shape)
+        self.pixel_key = ti.field(ti.i64, shape=pixel_class(frame_shape))
         self.pp_sums = ti.field(ti.f64, shape=(capacity, N_PP_SUMS))  # eliminate's sums, copied out at its end
         # eliminate_and_hand_over's decisions: per PP drop flag and rank, per rank its first member column
         self.pp_drop, self.pp_rank, self.pp_cursor = ti.field(ti.i8, capacity), ti.field(ti.i32, capacity), \
@@ -99,14 +107,14 @@ class PopulationKernels:
                 sums[k, P_Y] += ti.cast(self.y[b, i], ti.f64)
 
     @ti.func
-    def index_pixel(self, b: ti.i32, s: ti.i32, i: ti.i32) -> ti.i32:
-        """Flat pixel y·W + x (nearest) of particle s in slot i if it is kept, has Seq > 0 and lies in
-        the image (it takes part in the index image), else −1."""
-        h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
+    def index_pixel(self, b: ti.i32, s: ti.i32, i: ti.i32):
+        """(y, x, y·W + x) of the pixel nearest particle s in slot i if it is kept, has Seq > 0 and lies in
+        the image (it takes part in the index image), else (0, 0, −1)."""
+        h, w = self.frame_hw[0], self.frame_hw[1]
         x = ti.cast(ti.floor(self.x[b, i] + 0.5), ti.i32)
         y = ti.cast(ti.floor(self.y[b, i] + 0.5), ti.i32)
         ok = self.state_keep[s] != 0 and self.seq[b, i] > 0 and 0 <= x < w and 0 <= y < h
-        return ti.select(ok, y * w + x, -1)
+        return ti.select(ok, y, 0), ti.select(ok, x, 0), ti.select(ok, y * w + x, -1)
 
     @ti.func
     def index_key(self, s: ti.i32) -> ti.i64:
@@ -140,10 +148,10 @@ class PopulationKernels:
                             copies: ti.template(), members: ti.template()):
         """``hand_over``'s work; ``copies``: (rank, cursor, floats, ints)."""
         rank, cursor, floats, ints = ti.static(copies)
-        h, w = ti.static(self.pixel_key.shape[0], self.pixel_key.shape[1])
+        h, w = self.frame_hw[0], self.frame_hw[1]
         ti.loop_config(serialize=self.serial)
         for y, x in ti.ndrange(h, w):
-            self.pixel_key[y, x] = -1
+            self.pixel_key[y * w + x] = -1
             index[y, x] = 0
         if ti.static(members):  # one pass: each particle is copied out before its claim may drop it
             self.for_states(self.copy_and_claim, b, ti.static((drop, index, rank, cursor, floats, ints)))
@@ -237,34 +245,35 @@ class PopulationKernels:
         loop visits s in increasing order, so the last larger key wins at once; parallel loops
         take the atomic maximum and let :meth:`write_winner` write the Seq."""
         drop, index = ti.static(arrays)
-        w = ti.static(self.pixel_key.shape[1])
         if drop[self.state_pp[s]] != 0:
             self.state_keep[s] = ti.i8(0)
-        p = self.index_pixel(b, s, i)
+        y, x, p = self.index_pixel(b, s, i)
         if p >= 0:
             key = self.index_key(s)
             if ti.static(self.serial):
-                if key > self.pixel_key[p // w, p % w]:
-                    self.pixel_key[p // w, p % w] = key
-                    index[p // w, p % w] = self.seq[b, i]
+                if key > self.pixel_key[p]:
+                    self.pixel_key[p] = key
+                    index[y, x] = self.seq[b, i]
             else:
-                ti.atomic_max(self.pixel_key[p // w, p % w], key)
+                ti.atomic_max(self.pixel_key[p], key)
 
     @ti.func
     def write_winner(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
         """The particle that won its pixel writes its Seq there (parallel ``hand_over``)."""
         _, index = ti.static(arrays)
-        w = ti.static(self.pixel_key.shape[1])
-        p = self.index_pixel(b, s, i)
-        if p >= 0 and self.pixel_key[p // w, p % w] == self.index_key(s):
-            index[p // w, p % w] = self.seq[b, i]
+        y, x, p = self.index_pixel(b, s, i)
+        if p >= 0 and self.pixel_key[p] == self.index_key(s):
+            index[y, x] = self.seq[b, i]
 
 
 @ti.data_oriented
 class SearchingKernels(ParticleKernels, PopulationKernels):
     """The particle pool's kernels with Eqs. 36–38 on its fields: SGDS-PF's searching PFs."""
 
-    FIELDS_SIZED_BY_FRAME = True  # pixel_key has the frame's shape
+    @staticmethod
+    def frame_key(frame_shape) -> tuple:
+        """What of the frame's size the fields' shapes hold (``ParticleKernels.frame_key``): pixel_key's class."""
+        return (pixel_class(frame_shape),)
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
                  flat: bool, split: int = 1, motion=None, likelihood=None):

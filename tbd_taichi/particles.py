@@ -132,8 +132,8 @@ class ParticlePool:
         if engine == "taichi":
             from .launch import Launcher
 
-            # the frame's shape keys a reused set only where a field has it (kernels read frame_hw)
-            shapes = dims if getattr(Kernels, "FIELDS_SIZED_BY_FRAME", True) else sizes + layout
+            # the frame's size keys a reused set only as far as a field's shape holds it (kernels read frame_hw)
+            shapes = sizes + Kernels.frame_key(self.frame_shape) + layout
             fields = backend.reusable(self, (Kernels.__name__,) + shapes, lambda: Kernels(*dims))
             self.k, fresh = Launcher(fields), not backend.holds_old_values(fields)
         else:
@@ -427,9 +427,9 @@ class ParticlePool:
                   seq_out: np.ndarray | None = None) -> tuple[np.ndarray | None, GroupEstimates]:
         """:meth:`step` of this pool (with ``top_up`` and ``seq_out``) and of ``other`` (its live counts) on
         the same frame, then ``other``'s :meth:`estimates`: the same results as those three calls, in one
-        launch where the kernels allow (:meth:`_pairs_with`), so the threads that share this pool's
+        launch where the kernels allow (:meth:`pairs_with`), so the threads that share this pool's
         groups share ``other``'s as well.  Returns (Seq as :meth:`step` returns it, ``other``'s estimates)."""
-        if not self._pairs_with(other):
+        if not self.pairs_with(other):
             seq = self.step(frame, z, top_up=top_up, seq_out=seq_out)
             other.step(frame, z)
             return seq, other.estimates()
@@ -445,14 +445,18 @@ class ParticlePool:
             pool.buf, pool.counts = 1 - pool.buf, out
         return seq, other._estimates_from(moments)
 
-    def _pairs_with(self, other: "ParticlePool") -> bool:
-        """Whether :meth:`step_with` can step ``other`` in this pool's launch: both on Taichi's CPU layout,
-        this pool fused with whole groups per thread, the same frame shape and the same motion, PSF,
-        noise and intensity-floor constants."""
+    def pairs_with(self, other: "ParticlePool") -> bool:
+        """Whether :meth:`step_with` can step ``other`` in this pool's launch: both on Taichi's CPU layout with
+        the same frame shape and the same motion, PSF, noise and intensity-floor constants, and this pool either
+        fused with whole groups per thread or, like ``other``, serial and unsplit (one thread steps both pools'
+        groups, as their own serial steps would)."""
         same = (self.frame_shape, self.q1, self.q2, self.psf_sigma, self.noise_sigma, self.intensity_floor) == \
             (other.frame_shape, other.q1, other.q2, other.psf_sigma, other.noise_sigma, other.intensity_floor)
-        return (same and self.engine_name == other.engine_name == "taichi" and self._fused_step()
-                and self.k.tiles_by_group and not other.k.flat)
+        if not (same and self.engine_name == other.engine_name == "taichi") or self.k.flat or other.k.flat:
+            return False
+        if self.split == 1:
+            return self.k.serial and other.k.serial and other.split == 1
+        return self._fused_step() and self.k.tiles_by_group
 
     def _fused_step(self) -> bool:
         """Whether ``step`` runs as the kernels' three-pass ``fused_step``: split tile loops, and copying

@@ -4,7 +4,8 @@ kernel file.  As in SGDS-PF, fields sized by the frame are made first (there: th
 random tables and the pool.  Before the pools read the frame size from a field, and before the shared tables had an
 SNode tree of their own (they shared the tree of the fields made before them), the step compiled again at each
 size; each of the two fails this test alone.  A marked (light IR) kernel launched through the lean path is built
-once, under the light setting: one kernel file, the one Taichi's own launch writes, not the unmarked kernel's."""
+once, under the light setting: one kernel file, the one Taichi's own launch writes, not the unmarked kernel's.
+SGDS-PF's searching pool, whose per-pixel tables follow the frame's size class, compiles once per class."""
 import os
 import subprocess
 import sys
@@ -29,6 +30,34 @@ z = np.random.default_rng(0).standard_normal((h, w)).astype(np.float32)
 for frame in range(2):
     pool.step(frame, z)
 print(int(pool.estimates().n.sum() >= 0))
+"""
+
+
+SEARCHING_AT_SIZE = """
+import sys
+import numpy as np
+import tbd_taichi
+from tbd_taichi.kernels.populations import pixel_class
+from tbd_taichi.methods.sgds.populations import eliminated_per_population, slab_populations
+from tbd_taichi.methods.sgds.searching_pool import SearchingPool
+from tbd_taichi.particles import ParticlePool
+h, w = int(sys.argv[1]), int(sys.argv[2])
+tbd_taichi.init("cpu")
+search = SearchingPool([700] * 2, (h, w), seed=1, map_capacity=pixel_class((h, w)))
+search.configure_groups([0, 1], "map", pb=0.3, pd=0.05, intensity=(1.0, 3.0))
+pixels = np.arange(0, h * w, 7)
+search.set_proposal_map({g: (pixels, np.ones(len(pixels))) for g in (0, 1)}, np.arange(h * w, dtype=np.int32).reshape(h, w) % 5)
+tracks = ParticlePool([300] * 2, (h, w), seed=2)
+tracks.configure_groups([0, 1], "copy", vmax=1.0, intensity=(1.0, 3.0))
+z = np.random.default_rng(0).standard_normal((h, w)).astype(np.float32)
+seq, index = np.empty(search.capacity, np.int32), np.zeros((h, w), np.int32)
+assert search.pairs_with(tracks)
+for frame in range(3):
+    got, _ = search.step_with(tracks, frame, z, top_up=[700, 700], seq_out=seq)
+    pp_block, inverse, counts = slab_populations(search.counts, got)
+    take = eliminated_per_population(pp_block, counts, 70)
+    search.eliminate_and_hand_over(inverse, counts, take, np.full(len(counts), 0.5), index, 0.0, 0.0, [], 3.0, 1)
+print(int((index >= 0).all()))
 """
 
 
@@ -86,6 +115,19 @@ def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
     run_pool(tmp_path, (61, 37))
     new = kernel_files(tmp_path) - first
     assert not new, f"kernels compiled again at a new frame size: {sorted(new)}"
+
+
+def test_a_searching_pool_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
+    """SGDS-PF's searching pool (its paired step with the tracking pool, the set-up, elimination and hand-over):
+    the per-pixel tables are sized by ``pixel_class`` (40 × 50 and 43 × 47: 2 048 entries), so a new frame size of
+    the class finds every kernel in the cache; a size of the next class (61 × 37: 4 096) compiles again, as the
+    exact frame size did for every size before."""
+    run_script(tmp_path, SEARCHING_AT_SIZE, 40, 50)
+    first = kernel_files(tmp_path)
+    run_script(tmp_path, SEARCHING_AT_SIZE, 43, 47)
+    assert kernel_files(tmp_path) == first, "kernels compiled again within a size class"
+    run_script(tmp_path, SEARCHING_AT_SIZE, 61, 37)
+    assert kernel_files(tmp_path) - first, "a new size class reused kernels built for another"
 
 
 def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it(tmp_path):

@@ -539,11 +539,13 @@ def test_split_tile_loops_and_fused_step_give_the_same_bits(rng, monkeypatch, th
 
 
 @pytest.mark.skipif(TEST_ARCH != "cpu", reason="the paired step is the CPU's split layout")
-def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch):
-    """``step_with``: a split pool (four groups, whole groups per thread: the searching PFs) and a serial
-    pool of copying groups (the tracking PFs: one group of two tiles, an empty group, one emptied on the
-    way) in one launch, against each pool's own ``step`` and ``estimates``, over a top-up, a partial
-    resampling count and the Seq read-out.  It fails if a group of either pool is dropped or stepped twice."""
+@pytest.mark.parametrize("split", [2, 1])
+def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch, split):
+    """``step_with``: a split pool (four groups, whole groups per thread: the searching PFs; ``split`` 1: serial
+    and unsplit, as SGDS-PF's pool on real video) and a serial pool of copying groups (the tracking PFs: one
+    group of two tiles, an empty group, one emptied on the way) in one launch, against each pool's own ``step``
+    and ``estimates``, over a top-up, a partial resampling count and the Seq read-out.  It fails if a group of
+    either pool is dropped or stepped twice."""
     import tbd_taichi.particles as particles
 
     caps, track_caps = [2100, 1500, 1300, 1100], [500, 1200, 500, 500]
@@ -562,7 +564,7 @@ def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch):
         t = ParticlePool(track_caps, SHAPE, engine="taichi", seed=17)
         t.configure_groups(np.arange(4), "copy", pb=0.3, pd=0.1)
         t.set_state(track_states)
-        assert p._pairs_with(t)
+        assert p.pairs_with(t)
         out = []
         for f in range(4):
             if f == 2:
@@ -578,7 +580,7 @@ def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch):
             out.append((p.state(), t.state(), got.copy(), est.x, est.cov_e, est.max_logw, p.max_log_weights()))
         return out
 
-    monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2 if capacity > 3000 else 1)
+    monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: split if capacity > 3000 else 1)
     try:
         tbd_taichi.init("cpu", threads=2)
         paired, separate = run(True), run(False)  # run(False) steps the same pools through step and estimates
@@ -594,20 +596,36 @@ def test_paired_step_gives_each_pool_its_own_bits(rng, monkeypatch):
 
 
 def test_pools_pair_only_with_the_same_frame_and_constants(monkeypatch):
-    """``_pairs_with``: not across engines, frame shapes or motion constants, nor for a pool that is not
+    """``pairs_with``: not across engines, frame shapes or motion constants, nor for a pool that is not
     split by group (then ``step_with`` runs the three calls it stands for)."""
     import tbd_taichi.particles as particles
 
     monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 2)
     a = ParticlePool([1100] * 4, SHAPE)
     if not a._fused_step():  # a GPU: no split layout
-        assert not a._pairs_with(ParticlePool([500], SHAPE))
+        assert not a.pairs_with(ParticlePool([500], SHAPE))
         return
-    assert a._pairs_with(ParticlePool([500], SHAPE))
-    assert not a._pairs_with(ParticlePool([500], SHAPE, engine="numpy"))
-    assert not a._pairs_with(ParticlePool([500], (SHAPE[0] + 1, SHAPE[1])))
-    assert not a._pairs_with(ParticlePool([500], SHAPE, q1=0.002))
-    assert not ParticlePool([1100] * 2, SHAPE)._pairs_with(ParticlePool([500], SHAPE))  # tiles dealt one by one
+    assert a.pairs_with(ParticlePool([500], SHAPE))
+    assert not a.pairs_with(ParticlePool([500], SHAPE, engine="numpy"))
+    assert not a.pairs_with(ParticlePool([500], (SHAPE[0] + 1, SHAPE[1])))
+    assert not a.pairs_with(ParticlePool([500], SHAPE, q1=0.002))
+    assert not ParticlePool([1100] * 2, SHAPE).pairs_with(ParticlePool([500], SHAPE))  # tiles dealt one by one
+
+
+def test_serial_pools_pair_on_one_thread(monkeypatch):
+    """Two serial, unsplit pools pair (one thread steps both pools' groups, as their own steps would); a pool
+    whose loops run in parallel does not (its step would lose the threads)."""
+    import tbd_taichi.particles as particles
+
+    monkeypatch.setattr(particles, "tile_threads", lambda capacity, n_tiles, flat: 1)
+    a = ParticlePool([1100] * 4, SHAPE)
+    if a.k.flat:  # a GPU: no CPU layout
+        assert not a.pairs_with(ParticlePool([500], SHAPE))
+        return
+    assert a.k.serial and a.pairs_with(ParticlePool([500], SHAPE))
+    monkeypatch.setattr(particles, "SERIAL_THREADS", 0)
+    big = ParticlePool([particles.SERIAL_PARTICLES + 1], SHAPE)  # neither small nor on ≤ 2 threads: parallel loops
+    assert not big.k.serial and not big.pairs_with(ParticlePool([500], SHAPE))
 
 
 def test_tile_loops_split_only_for_large_pools_with_pinned_workers(monkeypatch):

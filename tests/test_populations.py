@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tbd_taichi.errors import ParameterError
-from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y
+from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, pixel_class
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
 from tbd_taichi.methods.sgds.searching_pool import SearchingPool
@@ -263,3 +263,10 @@ def test_one_launch_hand_over_engines_agree_without_tracks():
         np.testing.assert_array_equal(out["taichi"][1][key], out["numpy"][1][key], err_msg=key)
     for key in out["numpy"][3]:
         np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (40, 50), (64, 64), (256, 320), (233, 297), (1024, 1024)])
+def test_pixel_class_is_the_next_power_of_two_of_the_pixel_count(shape):
+    """The searching pool's per-pixel tables hold every pixel, in at most twice the room, a power of two."""
+    n = pixel_class(shape)
+    assert n >= shape[0] * shape[1] and n < 2 * max(shape[0] * shape[1], 2) and n & (n - 1) == 0

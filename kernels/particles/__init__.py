@@ -36,8 +36,12 @@ class ParticleKernels(LayoutMixin, SlotsMixin, PropagateMixin, WeightMixin, Resa
     Eqs. 9–10); ``likelihood``: the likelihood ratio the weights call (default
     :class:`~..models.PointPSFLikelihood`, Eq. 15).  Kernels compile for the models they were built with."""
 
-    FIELDS_SIZED_BY_FRAME = False  # no field's shape follows the frame (the kernels read frame_hw): a set of fields,
-    # and the kernels compiled for it, serves a pool at any frame size (``tbd_taichi.particles``' reuse key)
+    @staticmethod
+    def frame_key(frame_shape) -> tuple:
+        """What of the frame's size the fields' shapes hold: nothing here (the kernels read frame_hw), so a set of
+        fields, and the kernels compiled for it, serves a pool at any frame size (``tbd_taichi.particles``' reuse
+        key); a subclass with per-pixel fields names their size class."""
+        return ()
 
     def __init__(self, capacity: int, n_groups: int, n_tiles: int, frame_shape, map_capacity: int, serial: bool,
                  flat: bool, split: int = 1, motion=None, likelihood=None):

@@ -204,7 +204,9 @@ class LayoutMixin:
     def for_groups_with(self, other: ti.template(), body: ti.template(), args: ti.template(),
                         other_body: ti.template(), other_args: ti.template()):
         """body(g, args) for this pool's groups and other_body(h, other_args) for the groups of ``other`` (a
-        second pool), in one loop split like ``for_groups``: thread k takes groups k, k + split, … of each."""
+        second pool), in one loop split like ``for_groups``: thread k takes groups k, k + split, … of each (split 1:
+        one thread, serial pools)."""
+        ti.loop_config(serialize=self.split == 1)
         for v in range(self.split * THREAD_SPAN):
             if v % THREAD_SPAN == 0:
                 k = v // THREAD_SPAN

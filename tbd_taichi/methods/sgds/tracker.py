@@ -40,6 +40,7 @@ from ...background import DEFAULT_BACKGROUND
 from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
+from ...kernels.populations import pixel_class
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
@@ -98,7 +99,7 @@ class SGDSPF(OneSequence):
         self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
         self.search = SearchingPool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
-                                    map_capacity=self.shape[0] * self.shape[1], **common)
+                                    map_capacity=pixel_class(self.shape), **common)
         self.tracks_pool = ParticlePool([p.N_tpf] * max_tracks, self.shape, seed=seed + 7919, **common)
         intensity = (max(p.snr - 2.0, 0.1), p.snr + 3.0)  # Eq. 26 as printed (σ units); see the module notes
         self.search.configure_groups(np.arange(self.grid.n_blocks), "map", pb=p.P_b, pd=p.P_d_search,
@@ -259,9 +260,12 @@ class SGDSPF(OneSequence):
         has_map = np.zeros(grid.n_blocks, bool)
         has_map[list(maps)] = True
         top_up = np.where(has_map, p.N_sump, pool.counts)
-        if not self.active:
+        if not self.active and not pool.pairs_with(self.tracks_pool):
             return pool.step(f, z, top_up=top_up, seq_out=self._seq), None
-        return pool.step_with(self.tracks_pool, f, z, top_up=top_up, seq_out=self._seq)
+        # with no active track the tracking pool's empty groups cost next to nothing, and one kernel (step_pair)
+        # then serves every frame instead of three (the searching step, the tracking step, estimates)
+        seq, est = pool.step_with(self.tracks_pool, f, z, top_up=top_up, seq_out=self._seq)
+        return seq, est if self.active else None
 
     def _log_msw(self, front: FrontFrame) -> float:
         """ln MSW for Eq. 40 (``msw_reference``), after the searching PFs' step."""
