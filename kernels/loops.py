@@ -21,3 +21,18 @@ def light_ir(kernel):
     "A new frame size").  LLVM's own optimisation still runs; fast_math stays off, so the bits are the same."""
     setattr(kernel._primal, LIGHT_IR, True)
     return kernel
+
+
+def size_class(n: int) -> int:
+    """The size class of an extent of n ≥ 0 entries (rows, lane vectors, blocks, pixels): the smallest power of
+    two ≥ max(n, 2).  Fields allocated at the class, with the true extent read at run time, keep their shapes, and
+    with them the compiled kernels (Taichi's offline cache is keyed on the fields' shapes), for every extent of
+    the class."""
+    return 1 << max(int(n) - 1, 1).bit_length()
+
+
+def frame_class(frame_shape) -> tuple[int, int]:
+    """(rows, columns) of the size class of frames of ``frame_shape`` (H, W): H and W in 8-pixel vectors (the
+    saliency kernels' lanes) each rounded up by :func:`size_class`; the per-pixel fields of SGDS-PF's saliency
+    stage and searching pool take these extents."""
+    return size_class(int(frame_shape[0])), 8 * size_class(-(-int(frame_shape[1]) // 8))

@@ -19,6 +19,7 @@ kernels of ``tbd_taichi.methods.sgds.searching_pool.SearchingPool``); the NumPy 
 """
 import taichi as ti
 
+from .loops import frame_class
 from .particles import ParticleKernels
 
 # columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
@@ -28,10 +29,11 @@ RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, 
 
 
 def pixel_class(frame_shape) -> int:
-    """Entries of a per-pixel table for frames of ``frame_shape`` (H, W): H·W rounded up to a power of two, so
-    that frames of one size class share the table's shape, and with it the compiled kernels (the kernels read
-    the frame's size from ``frame_hw``)."""
-    return 1 << max(int(frame_shape[0]) * int(frame_shape[1]) - 1, 1).bit_length()
+    """Entries of a per-pixel table for frames of ``frame_shape`` (H, W): the pixels of its size class
+    (``loops.frame_class``), so that frames of one class share the table's shape, and with it the compiled
+    kernels (the kernels read the frame's size from ``frame_hw``)."""
+    rows, columns = frame_class(frame_shape)
+    return rows * columns
 
 
 @ti.data_oriented

@@ -11,12 +11,16 @@ class SaliencyFields:
     ``n_chunks`` (runs of rows of the streamed filters) and ``serial`` (one-thread loops).  Kernels compile
     once per object (keyed by identity), so these must not change after the first launch.  Scalars that a
     caller sets once live in fields: ``params64`` = [snr (Eqs. 23, 26), pixel count N],
-    ``params32`` = [A (Eq. 27, σ = 1), γ (multi-frame LEF decay), lef_scale]."""
+    ``params32`` = [A (Eq. 27, σ = 1), γ (multi-frame LEF decay), lef_scale]; ``dims`` (``D_*``) = the frame's
+    rows H, 8-lane vectors per row V, width W (px) and blocks, which the kernels read at run time: the fields
+    are allocated at those extents' size classes (``loops.size_class``), so one compiled set serves a class."""
 
     def __init__(self, r: int, n_chunks: int, serial: bool, **fields):
         self.r, self.n_chunks, self.serial = int(r), int(n_chunks), bool(serial)
         self.__dict__.update(fields)
 
+
+D_ROWS, D_LANES, D_WIDTH, D_BLOCKS = range(4)  # the columns of ``dims``
 
 # the ring slots a launch works on, one i32 array (``ring_slots``): the frame's slot, the three slots whose images
 # are summed (−1: none), the destination slot of a sum, the multi-frame LEF's source and destination memory slots

@@ -7,6 +7,7 @@ always read as "outside the image".
 import taichi as ti
 
 from .loops import thread_span
+from .saliency_fields import D_LANES, D_ROWS
 
 LANES = 8
 NEG_INF = -3.0e38
@@ -42,7 +43,8 @@ def row_vector(src: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32, valid: ti.t
 
 @ti.func
 def frame_vector(z: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32) -> VEC:
-    """z[s, y, xb] of a frame ring, 0 for xb outside the row (a frame's padding lanes hold 0)."""
+    """z[s, y, xb] of a frame ring, 0 for xb outside the row (a frame's padding lanes hold 0, and so does the
+    vector after a row's last, ``store_frame``'s, in a ring wider than the frame)."""
     v = VEC(0.0)
     if 0 <= xb < z.shape[2]:
         v = z[s, y, xb]
@@ -57,13 +59,20 @@ def positive_row_vector(z: ti.template(), s: ti.i32, y: ti.i32, xb: ti.i32) -> V
 
 
 @ti.func
+def image_dims(f: ti.template()):
+    """(rows H, 8-lane vectors per row V) of the frame, read at run time from the fields ``f``
+    (:class:`~.saliency_fields.SaliencyFields`; its fields have those extents' size classes)."""
+    return f.dims[D_ROWS], f.dims[D_LANES]
+
+
+@ti.func
 def chunk_rows(c: ti.i32, n_chunks: ti.i32, h: ti.i32):
     """Rows [y0, y1) of chunk c when h rows are split into n_chunks near-equal runs."""
     return (c * h) // n_chunks, ((c + 1) * h) // n_chunks
 
 
 @ti.func
-def for_row_chunks(h: ti.template(), halo: ti.template(), n_chunks: ti.i32, serial: ti.template(), body: ti.template(),
+def for_row_chunks(h: ti.i32, halo: ti.template(), n_chunks: ti.i32, serial: ti.template(), body: ti.template(),
                    args: ti.template()):
     """body(c, y, y0, y1, args) for every chunk c of the h rows, [y0, y1) (``chunk_rows``), and each y in
     [y0 − halo, y1 + halo) in order: the streamed filters' walk down the image, one thread a chunk (the first

@@ -5,7 +5,8 @@ proposal, copied sparsely to host arrays.
 import taichi as ti
 
 from .loops import light_ir
-from .saliency_lanes import LANES, NEG_INF, ROW_BLOCK
+from .saliency_fields import D_BLOCKS, D_WIDTH
+from .saliency_lanes import LANES, NEG_INF, ROW_BLOCK, image_dims
 from .saliency_lef import correlate_d, lef_log_weight
 
 
@@ -14,22 +15,24 @@ def candidate_pixels(acc2: ti.template(), acc: ti.template(), acc_max: ti.templa
                      valid: ti.template(), d: ti.template(), a: ti.f32, stats: ti.template(),
                      memory: ti.template(), ms: ti.i32, lef_scale: ti.f32, accumulated: ti.template(),
                      row_x: ti.template(), row_logw: ti.template(), row_lef: ti.template(), n_row: ti.template(),
-                     serial: ti.template()):
+                     serial: ti.template(), dims: ti.template()):
     """Eqs. 24 and 27–29: I_rt = [I_acc2 > T_acc2] ∧ [I_acc == I_acc_max], tested 8 lanes at a time;
     at I_rt pixels log Sal = log ω̌_lef (σ = 1), or, with ``accumulated``, lef_scale·L of the
     multi-frame LEF in memory[ms] (:func:`accumulate_lef`), listed per row (row_x, row_logw) in
-    increasing x, with each pixel's log ω̌_lef (Eq. 28) in row_lef (for ICEF's MSW, Eq. 40)."""
+    increasing x, with each pixel's log ω̌_lef (Eq. 28) in row_lef (for ICEF's MSW, Eq. 40).  ``dims``: (rows H,
+    lane vectors V)."""
     threshold = stats[0]
     i_min = ti.cast(stats[1], ti.f32)
     i_max = ti.cast(stats[2], ti.f32)
+    h, lanes = dims
     ti.loop_config(serialize=serial, block_dim=ROW_BLOCK)
-    for y in range(acc2.shape[1]):
+    for y in range(h):
         n = 0
-        for xb in range(acc2.shape[2]):
+        for xb in range(lanes):
             keep = (ti.cast(acc2[0, y, xb], ti.f64) > threshold) & (acc[s, y, xb] == acc_max[s, y, xb]) & \
                 (valid[xb] > 0)
             if keep.any():
-                lef = lef_log_weight(correlate_d(z, s, d, y, xb), a, i_min, i_max)
+                lef = lef_log_weight(correlate_d(z, s, d, y, xb, h), a, i_min, i_max)
                 lw = lef
                 if ti.static(accumulated):
                     lw = lef_scale * memory[ms, y, xb]
@@ -95,7 +98,8 @@ def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti
                         block_offset: ti.template(), block_nnz: ti.template(), block_max: ti.template(),
                         entry_pixel: ti.template(), entry_logw: ti.template(), entry_sal: ti.template(),
                         scratch: ti.template(), block_stats: ti.template(), proposal: ti.template(),
-                        written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template()):
+                        written: ti.template(), n_written: ti.template(), row_lef: ti.template(), best: ti.template(),
+                        dims: ti.template()):
     """Eqs. 29–33 for every block in one serial launch (blocks are few and I_rt pixels sparse).
 
     The I_rt pixels are first gathered from the row lists into per-block slabs.  Sal = exp(log Sal − block max); N_eff = (Σ Sal)²/Σ Sal² in f64 (Eq. 30); T_ep is the
@@ -104,19 +108,19 @@ def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti
     pixels are cleared first; block_stats[b] = (N_eff, k, nnz, Σ kept Sal).  The block
     accumulators are reset for the next frame.  best[i] = (log ω̌_lef, pixel y·W + x) of the I_rt
     pixels with the K = best.shape[0] largest log ω̌_lef, descending (ties in row-major order; NEG_INF
-    and −1 where there are fewer).
+    and −1 where there are fewer).  ``dims``: the frame's (rows H, width W px, blocks).
     """
     ti.loop_config(serialize=True)
     for _ in range(1):
+        h, w, n_blocks = dims
         for i in range(n_written[None]):
             p = written[i]
-            proposal[p // proposal.shape[1], p % proposal.shape[1]] = 0.0
+            proposal[p // w, p % w] = 0.0
         n_written[None] = 0
-        w = proposal.shape[1]
         for i in range(best.shape[0]):
             best[i, 0] = NEG_INF
             best[i, 1] = -1.0
-        for y in range(n_row.shape[0]):  # gather the I_rt pixels into block slabs, rows in order
+        for y in range(h):  # gather the I_rt pixels into block slabs, rows in order
             for i in range(n_row[y]):
                 x = row_x[y, i]
                 lw = row_logw[y, i]
@@ -127,7 +131,7 @@ def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti
                 entry_logw[e] = lw
                 block_nnz[b] += 1
                 insert_best(best, row_lef[y, i], y * w + x)
-        for b in range(block_nnz.shape[0]):
+        for b in range(n_blocks):
             n = block_nnz[b]
             off = block_offset[b]
             s1 = ti.cast(0.0, ti.f64)
@@ -151,7 +155,7 @@ def proposals_per_block(row_x: ti.template(), row_logw: ti.template(), n_row: ti
                 for i in range(n):
                     if entry_logw[off + i] >= t_ep:
                         p = entry_pixel[off + i]
-                        proposal[p // proposal.shape[1], p % proposal.shape[1]] = ti.cast(
+                        proposal[p // w, p % w] = ti.cast(
                             ti.cast(entry_sal[off + i], ti.f64) / kept, ti.f32)
                         written[n_written[None]] = p
                         n_written[None] += 1
@@ -179,11 +183,12 @@ def clear_previous_proposal(written: ti.template(), n_written: ti.template(), pr
 @ti.func
 def copy_out_proposal(proposal: ti.template(), written: ti.template(), n_written: ti.template(), best: ti.template(),
                       proposal_out: ti.template(), best_out: ti.template()):
-    """The frame's proposal pixels (the ``written`` list; ``proposal_out`` arrives zeroed) and ``best`` into
-    host arrays (one serial task: the pixels are few)."""
+    """The frame's proposal pixels (the ``written`` list, pixels y·W + x of the frame's width W =
+    ``proposal_out``'s; ``proposal_out`` arrives zeroed) and ``best`` into host arrays (one serial task: the
+    pixels are few)."""
     ti.loop_config(serialize=True)
     for _ in range(1):
-        w = proposal.shape[1]
+        w = proposal_out.shape[1]
         for i in range(n_written[None]):
             y, x = written[i] // w, written[i] % w
             proposal_out[y, x] = proposal[y, x]
@@ -201,10 +206,11 @@ def proposal_from_candidates(f: ti.template(), zs: ti.i32, ms: ti.i32, accumulat
     proposal and best list into host arrays (:func:`copy_out_proposal`; with ``reuse``, ``proposal_out``
     holds the last frame's proposal, cleared first by :func:`clear_previous_proposal`), in one launch
     (apart from the first half because one kernel for both compiles much longer for no gain)."""
+    h, lanes = image_dims(f)
     candidate_pixels(f.acc2, f.acc, f.acc_max, zs, f.z, f.valid, f.d, f.params32[0], f.stats, f.memory, ms,
-                     f.params32[2], accumulated, f.row_x, f.row_logw, f.row_lef, f.n_row, f.serial)
+                     f.params32[2], accumulated, f.row_x, f.row_logw, f.row_lef, f.n_row, f.serial, (h, lanes))
     clear_previous_proposal(f.written, f.n_written, proposal_out, reuse)
     proposals_per_block(f.row_x, f.row_logw, f.n_row, f.row_base, f.col_block, f.block_offset, f.block_nnz,
                         f.block_max, f.entry_pixel, f.entry_logw, f.entry_sal, f.scratch, f.block_stats, f.proposal,
-                        f.written, f.n_written, f.row_lef, f.best)
+                        f.written, f.n_written, f.row_lef, f.best, (h, f.dims[D_WIDTH], f.dims[D_BLOCKS]))
     copy_out_proposal(f.proposal, f.written, f.n_written, f.best, proposal_out, best_out)

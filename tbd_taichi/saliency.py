@@ -32,6 +32,7 @@ from . import backend
 from .engines import check_engine
 from .errors import ParameterError
 from .io import stream_frame
+from .kernels.loops import frame_class, size_class
 from .kernels.saliency_fields import ring_slots
 from .numpy_kernels import saliency as nps
 
@@ -166,6 +167,13 @@ class NumpySaliencyEngine:
 CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
 
 
+def padded(array: np.ndarray, shape) -> np.ndarray:
+    """``array`` in the leading corner of zeros of ``shape`` (a field of the size class, :mod:`.kernels.loops`)."""
+    out = np.zeros(shape, np.asarray(array).dtype)
+    out[tuple(slice(0, n) for n in np.shape(array))] = array
+    return out
+
+
 def chunk_count(height: int, serial: bool, arch: str) -> int:
     """Runs of rows the streamed max filters split the image into: one when serial, else
     ⌈H / rows⌉ (long runs on the CPU, where halo rows cost; short ones on a GPU, for threads)."""
@@ -214,17 +222,24 @@ class TaichiSaliencyEngine:
         self.memory_slot = 0  # slot of memory holding the last emitted frame's multi-frame LEF
         self.shape = (int(shape[0]), int(shape[1]))
         self.n_lanes, valid = lane_layout(self.shape[1])
+        # the fields' extents: each size class of the frame's (rows, lane vectors, blocks) shares one set of
+        # compiled kernels, which read the true extents from f.dims
+        rows, columns = frame_class(self.shape)
+        self.classes = (rows, columns // ks.LANES, size_class(grid.n_blocks))
         self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
-        self.n_chunks = chunk_count(self.shape[0], self.serial, backend.current().arch)
+        self.n_chunks = chunk_count(self.classes[0], self.serial, backend.current().arch)
         self.keep_i_se = False  # also store I_se (tests, figures)
-        self.f = backend.reusable(self, ("saliency", self.shape, grid.n_blocks, self.r, self.n_chunks, self.serial),
-                                  self._fields)
+        self.f = backend.reusable(self, ("saliency", self.classes, self.r, self.n_chunks, self.serial), self._fields)
         f = self.f
         f.params32[1] = lef_memory  # γ; snr, N and A in second_layer_and_blocks
         f.params32[2] = lef_scale
         self.params = None  # (snr, A) last written to f
-        backend.from_host_many(f, {"valid": valid, "d": d, "row_base": grid.row_base, "col_block": grid.col_block,
-                                   "block_offset": grid.offsets})
+        rows, lanes, blocks = self.classes
+        backend.from_host_many(f, {"valid": padded(valid, (lanes, ks.LANES)), "d": d,
+                                   "row_base": padded(grid.row_base, (rows,)),
+                                   "col_block": padded(grid.col_block, (lanes * ks.LANES,)),
+                                   "block_offset": padded(grid.offsets, (blocks,)),
+                                   "dims": np.array([self.shape[0], self.n_lanes, self.shape[1], grid.n_blocks])})
         f.block_max.fill(ks.NEG_INF)
         if backend.holds_old_values(f):  # new fields are zeros
             backend.zero_many(f, ("proposal", "n_written", "memory"))
@@ -237,13 +252,15 @@ class TaichiSaliencyEngine:
 
         from .kernels.saliency_fields import SaliencyFields
 
-        ks, (h, w), nb = self.ks, self.shape, self.grid.n_blocks
-        image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, self.n_lanes))  # noqa: E731
+        ks, (h, lanes, nb) = self.ks, self.classes
+        w = lanes * ks.LANES
+        image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, lanes))  # noqa: E731
         f = SaliencyFields(self.r, self.n_chunks, self.serial,
-                           valid=ti.Vector.field(ks.LANES, ti.f32, shape=self.n_lanes), ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
+                           valid=ti.Vector.field(ks.LANES, ti.f32, shape=lanes), ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
         f.z, f.se_max, f.acc, f.acc_max = (f.ring[name] for name in ("z", "se_max", "acc", "acc_max"))
         f.params64, f.params32 = ti.field(ti.f64, shape=2), ti.field(ti.f32, shape=3)
-        rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.n_chunks, depth, self.n_lanes))  # noqa: E731
+        f.dims = ti.field(ti.i32, shape=4)  # saliency_fields.D_*: H, V, W, blocks of the frame
+        rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.n_chunks, depth, lanes))  # noqa: E731
         f.hs, f.hm, f.ring_max, f.line = rows(2 * self.r + 1), rows(2 * self.r + 1), rows(2 * self.r + 1), rows(1)
         f.i_se, f.acc2 = image(), image()
         f.z_rows = ti.field(ti.f64, shape=(3, h, 2))
@@ -265,10 +282,19 @@ class TaichiSaliencyEngine:
         f.entry_sal, f.scratch = ti.field(ti.f32, shape=h * w), ti.field(ti.f32, shape=h * w)
         return f
 
+    def host_lanes_of(self, field, slot: int) -> np.ndarray:
+        """Slot ``slot`` of a lane-layout ring field (slots, rows, vectors) as the frame's (H, V, 8) lanes, cut from
+        the field's size-class extents (tests, figures)."""
+        return backend.to_host(field)[slot][:self.shape[0], :self.n_lanes]
+
+    def put_lanes(self, field, images: np.ndarray) -> None:
+        """Fill a lane-layout ring field with ``images`` (slots, H, V, 8), zero beyond the frame (tests)."""
+        field.from_numpy(padded(images, tuple(field.shape) + (images.shape[-1],)))
+
     def proposal_copy(self) -> np.ndarray:
         """The last emitted frame's proposal (Eq. 33) as a host array of its own, which the caller may change."""
         out, self.host_proposal = self.host_proposal, None
-        return out if out is not None else backend.to_host(self.f.proposal)
+        return out if out is not None else backend.to_host(self.f.proposal)[:self.shape[0], :self.shape[1]].copy()
 
     def put_energy_and_first_layer(self, slot: int, z: np.ndarray, slots, scale: float, dst: int) -> None:
         """Frame t into ``slot`` with its I_se_max, and the first layer of frame t − 1 into ``dst`` (as
@@ -301,7 +327,7 @@ class TaichiSaliencyEngine:
         ks.proposal_from_candidates(f, slot, self.memory_slot, accumulated, self.host_proposal, best, int(reuse))
         if not details:
             return {"best_lef": best}
-        stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)
+        stats, blocks = backend.to_host(f.stats), backend.to_host(f.block_stats)[:self.grid.n_blocks]
         nnz = blocks[:, 2].astype(np.int64)
         entries = backend.to_host(self.f.entry_pixel)
         mask = np.zeros(self.shape, bool)

@@ -61,6 +61,19 @@ print(int((index >= 0).all()))
 """
 
 
+SGDS_AT_SIZE = """
+import sys
+import numpy as np
+import tbd_taichi as tbd
+h, w = int(sys.argv[1]), int(sys.argv[2])
+tbd.init("cpu")
+scene = tbd.simulate((h, w), 14, snr=3.0, seed=1)
+tracker = tbd.SGDSPF((h, w), snr=3.0)
+rows = [row for frame in scene.frames for row in tracker.update(frame)]
+print(int(len(tracker.finish()) >= 0))
+"""
+
+
 def cache_files(path: Path) -> set:
     return {str(p.relative_to(path)) for p in path.rglob("*") if p.is_file()}
 
@@ -119,14 +132,26 @@ def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
 
 def test_a_searching_pool_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """SGDS-PF's searching pool (its paired step with the tracking pool, the set-up, elimination and hand-over):
-    the per-pixel tables are sized by ``pixel_class`` (40 × 50 and 43 × 47: 2 048 entries), so a new frame size of
-    the class finds every kernel in the cache; a size of the next class (61 × 37: 4 096) compiles again, as the
-    exact frame size did for every size before."""
+    the per-pixel tables are sized by ``pixel_class`` (40 × 50 and 43 × 47: 64 rows × 64 columns), so a new frame
+    size of the class finds every kernel in the cache; a size of the next class (70 × 37: 128 rows) compiles
+    again, as the exact frame size did for every size before."""
     run_script(tmp_path, SEARCHING_AT_SIZE, 40, 50)
     first = kernel_files(tmp_path)
     run_script(tmp_path, SEARCHING_AT_SIZE, 43, 47)
     assert kernel_files(tmp_path) == first, "kernels compiled again within a size class"
-    run_script(tmp_path, SEARCHING_AT_SIZE, 61, 37)
+    run_script(tmp_path, SEARCHING_AT_SIZE, 70, 37)
+    assert kernel_files(tmp_path) - first, "a new size class reused kernels built for another"
+
+
+def test_sgds_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
+    """SGDS-PF end to end (normalisation, the saliency stage, both particle pools, hand-over): at a second frame
+    size of the first one's class (and block count) every kernel comes from the cache; at a size of another class
+    some compile."""
+    run_script(tmp_path, SGDS_AT_SIZE, 40, 50)
+    first = kernel_files(tmp_path)
+    run_script(tmp_path, SGDS_AT_SIZE, 43, 47)
+    assert kernel_files(tmp_path) == first, "kernels compiled again within a size class"
+    run_script(tmp_path, SGDS_AT_SIZE, 70, 37)
     assert kernel_files(tmp_path) - first, "a new size class reused kernels built for another"
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from tbd_taichi.errors import ParameterError
+from tbd_taichi.kernels.loops import frame_class
 from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, pixel_class
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
@@ -265,8 +266,10 @@ def test_one_launch_hand_over_engines_agree_without_tracks():
         np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)
 
 
-@pytest.mark.parametrize("shape", [(1, 1), (40, 50), (64, 64), (256, 320), (233, 297), (1024, 1024)])
-def test_pixel_class_is_the_next_power_of_two_of_the_pixel_count(shape):
-    """The searching pool's per-pixel tables hold every pixel, in at most twice the room, a power of two."""
-    n = pixel_class(shape)
-    assert n >= shape[0] * shape[1] and n < 2 * max(shape[0] * shape[1], 2) and n & (n - 1) == 0
+@pytest.mark.parametrize("shape, rows, columns", [((1, 1), 2, 16), ((40, 50), 64, 64), ((64, 64), 64, 64),
+                                                  ((256, 320), 256, 512), ((233, 297), 256, 512),
+                                                  ((229, 283), 256, 512), ((1025, 1024), 2048, 1024)])
+def test_pixel_class_holds_the_rows_and_lane_columns_of_the_size_class(shape, rows, columns):
+    """The searching pool's per-pixel tables hold every pixel: rows and 8-pixel column vectors each rounded up to
+    a power of two (``loops.frame_class``, the saliency stage's classes too)."""
+    assert frame_class(shape) == (rows, columns) and pixel_class(shape) == rows * columns >= shape[0] * shape[1]

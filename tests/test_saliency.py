@@ -8,6 +8,7 @@ import taichi as ti
 
 from tbd_taichi import backend, normalize, saliency, simulate
 from tbd_taichi.kernels import saliency as ks
+from tbd_taichi.kernels.loops import size_class
 from tbd_taichi.kernels.saliency_fields import SaliencyFields, ring_slots
 from tbd_taichi.numpy_kernels import saliency as nps
 from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
@@ -30,6 +31,13 @@ def lane_ring(img):
 
 def lane_out(shape, blocks):
     return ti.Vector.field(8, ti.f32, shape=(1, shape[0], blocks))
+
+
+def frame_dims(shape, blocks, n_blocks=0):
+    """The ``dims`` field of fields of the frame's own extents (saliency_fields.D_*: H, V, W, blocks)."""
+    dims = ti.field(ti.i32, shape=4)
+    dims.from_numpy(np.array([shape[0], blocks, shape[1], n_blocks], np.int32))
+    return dims
 
 
 def random_image(rng, shape, kind):
@@ -60,7 +68,7 @@ def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
     acc, dst = lane_out(shape, blocks), lane_out(shape, blocks)
     line, ring = chunk_rings(n_chunks, 2 * r + 1, blocks)
     fields = SaliencyFields(r, n_chunks, serial, se_max=src, valid=valid, acc=acc, line=line, ring_max=ring,
-                            acc_max=dst)
+                            acc_max=dst, dims=frame_dims(shape, blocks))
     size = 2 * r + 1
     for kind in KINDS:
         img = random_image(rng, shape, kind)
@@ -81,14 +89,14 @@ def test_energy_collection(rng, shape, chunked, monkeypatch):
         monkeypatch.setattr(backend, "SERIAL_PIXELS", 0)
         monkeypatch.setitem(saliency.CHUNK_ROWS, "cpu", 2)
     engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
-    assert engine.n_chunks == (-(-shape[0] // 2) if chunked else 1)
+    assert engine.n_chunks == (-(-size_class(shape[0]) // 2) if chunked else 1)  # rows of the size class
     engine.keep_i_se = True
     for kind in KINDS:
         z = random_image(rng, shape, kind)
         engine.put_energy_and_first_layer(1, z, [-1, -1, -1], 1.0, 0)  # the frame alone (no first layer)
-        got = from_lanes(engine.f.i_se.to_numpy()[0], shape[1])  # I_se
+        got = from_lanes(engine.host_lanes_of(engine.f.i_se, 0), shape[1])  # I_se
         np.testing.assert_array_equal(got, nps.energy_collection(z))  # same f32 operations in the same order
-        se_max = from_lanes(engine.f.ring["se_max"].to_numpy()[1], shape[1])
+        se_max = from_lanes(engine.host_lanes_of(engine.f.ring["se_max"], 1), shape[1])
         np.testing.assert_array_equal(se_max, nps.max_filter(got))
         p = np.maximum(z.astype(np.float64), 0)
         total = ndi.correlate(p, np.ones((3, 3)), mode="constant")
@@ -164,16 +172,16 @@ def test_multi_frame_lef_against_scipy_and_twin(rng, shape, chunked, monkeypatch
     for f in range(6):
         z = random_image(rng, shape, KINDS[f % 3]) * (1e-2 if KINDS[f % 3] == "extreme" else 1)
         src, dst = f % 2, 1 - f % 2
-        engine.f.ring["z"].from_numpy(np.repeat(to_lanes(z, engine.n_lanes)[None], 3, axis=0))
+        engine.put_lanes(engine.f.ring["z"], np.repeat(to_lanes(z, engine.n_lanes)[None], 3, axis=0))
         engine.f.params32[0] = A  # γ is the engine's lef_memory
         ks.accumulate_lef(engine.f, 0, src, dst)
-        got = from_lanes(engine.f.memory.to_numpy()[dst], shape[1])
+        got = from_lanes(engine.host_lanes_of(engine.f.memory, dst), shape[1])
         twin = nps.accumulate_lef(twin, z, D, A, gamma)
         np.testing.assert_array_equal(got, twin)
         b = ndi.correlate(z.astype(np.float64), D.astype(np.float64), mode="constant")
         ref = np.maximum(b, 0) ** 2 / (4 * A) + gamma * ndi.maximum_filter(ref, 3, mode="nearest")
         np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5 * max(1.0, np.abs(ref).max()))
-        assert np.all(engine.f.memory.to_numpy()[dst].reshape(shape[0], -1)[:, shape[1]:] == 0)  # padding lanes
+        assert np.all(engine.host_lanes_of(engine.f.memory, dst).reshape(shape[0], -1)[:, shape[1]:] == 0)  # padding
 
 
 def test_multi_frame_lef_adds_up_a_moving_target_and_not_the_noise():
