@@ -266,10 +266,10 @@ def test_one_launch_hand_over_engines_agree_without_tracks():
         np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)
 
 
-@pytest.mark.parametrize("shape, rows, columns", [((1, 1), 2, 16), ((40, 50), 64, 64), ((64, 64), 64, 64),
-                                                  ((256, 320), 256, 512), ((233, 297), 256, 512),
-                                                  ((229, 283), 256, 512), ((1025, 1024), 2048, 1024)])
-def test_pixel_class_holds_the_rows_and_lane_columns_of_the_size_class(shape, rows, columns):
-    """The searching pool's per-pixel tables hold every pixel: rows and 8-pixel column vectors each rounded up to
-    a power of two (``loops.frame_class``, the saliency stage's classes too)."""
+@pytest.mark.parametrize("shape, rows, columns", [((1, 1), 2, 64), ((40, 50), 64, 64), ((64, 64), 64, 64),
+                                                  ((256, 320), 256, 320), ((233, 297), 256, 320),
+                                                  ((229, 283), 256, 320), ((1025, 1030), 2048, 1088)])
+def test_pixel_class_holds_the_rows_and_columns_of_the_size_class(shape, rows, columns):
+    """The searching pool's per-pixel tables hold every pixel: rows rounded up to a power of two, columns to a
+    multiple of 64 px (``loops.frame_class``, the saliency stage's classes too)."""
     assert frame_class(shape) == (rows, columns) and pixel_class(shape) == rows * columns >= shape[0] * shape[1]
