@@ -13,7 +13,9 @@ serial fixed with it; snr, N, A, γ and lef_scale in its ``params64``/``params32
 slots and scales; the NumPy twin is of this module as a whole.
 
 Layout: an image (H, W) is a field of 8-lane vectors (H, ⌈W/8⌉) along x (SIMD rows); ring buffers add a
-leading slot axis; padding lanes past W read as "outside the image".
+leading slot axis; padding lanes past W read as "outside the image".  The fields have the extents of the frame's
+size class (``loops.frame_class``), and the kernels read the frame's own (``f.dims``) at run time, so one compiled
+set serves every frame size of a class.
 
 Every kernel runs in IEEE f32 (the runtime starts with fast_math off) and adds in a fixed order, so the
 NumPy twin ``tbd_taichi.numpy_kernels.saliency`` reproduces the same bits except after exp().  Loops run
