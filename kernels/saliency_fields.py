@@ -8,19 +8,21 @@ import numpy as np
 
 class SaliencyFields:
     """Named Taichi fields plus the constants fixed with their shapes: ``r`` (max-filter radius, px),
-    ``n_chunks`` (runs of rows of the streamed filters) and ``serial`` (one-thread loops).  Kernels compile
+    ``n_chunks`` (the chunk rings' room: the most runs of rows of the streamed filters) and ``serial``
+    (one-thread loops).  Kernels compile
     once per object (keyed by identity), so these must not change after the first launch.  Scalars that a
     caller sets once live in fields: ``params64`` = [snr (Eqs. 23, 26), pixel count N],
     ``params32`` = [A (Eq. 27, σ = 1), γ (multi-frame LEF decay), lef_scale]; ``dims`` (``D_*``) = the frame's
-    rows H, 8-lane vectors per row V, width W (px) and blocks, which the kernels read at run time: the fields
-    are allocated at those extents' size classes (``loops.size_class``), so one compiled set serves a class."""
+    rows H, 8-lane vectors per row V, width W (px), blocks and runs of rows of the streamed filters, which the
+    kernels read at run time: the fields are allocated at the extents of the frame's size class
+    (``loops.frame_class``), so one compiled set serves a class."""
 
     def __init__(self, r: int, n_chunks: int, serial: bool, **fields):
         self.r, self.n_chunks, self.serial = int(r), int(n_chunks), bool(serial)
         self.__dict__.update(fields)
 
 
-D_ROWS, D_LANES, D_WIDTH, D_BLOCKS = range(4)  # the columns of ``dims``
+D_ROWS, D_LANES, D_WIDTH, D_BLOCKS, D_CHUNKS = range(5)  # the columns of ``dims``
 
 # the ring slots a launch works on, one i32 array (``ring_slots``): the frame's slot, the three slots whose images
 # are summed (−1: none), the destination slot of a sum, the multi-frame LEF's source and destination memory slots

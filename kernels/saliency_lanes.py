@@ -7,7 +7,7 @@ always read as "outside the image".
 import taichi as ti
 
 from .loops import thread_span
-from .saliency_fields import D_LANES, D_ROWS
+from .saliency_fields import D_CHUNKS, D_LANES, D_ROWS
 
 LANES = 8
 NEG_INF = -3.0e38
@@ -63,6 +63,12 @@ def image_dims(f: ti.template()):
     """(rows H, 8-lane vectors per row V) of the frame, read at run time from the fields ``f``
     (:class:`~.saliency_fields.SaliencyFields`; its fields have those extents' size classes)."""
     return f.dims[D_ROWS], f.dims[D_LANES]
+
+
+@ti.func
+def chunk_runs(f: ti.template()) -> ti.i32:
+    """The runs of rows the streamed filters split the frame into (``f.dims``; at most the rings' ``f.n_chunks``)."""
+    return f.dims[D_CHUNKS]
 
 
 @ti.func

@@ -7,8 +7,8 @@ import taichi as ti
 
 from .loops import light_ir
 from .saliency_fields import R_FRAME, R_MEMORY, R_MEMORY_SRC, R_SUM_A, R_SUM_B, R_SUM_C
-from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, frame_vector,
-                             image_dims, lane_shift, store_row_moments, sum_of_slots)
+from .saliency_lanes import (LEF_NO_CAP, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_runs, for_row_chunks,
+                             frame_vector, image_dims, lane_shift, store_row_moments, sum_of_slots)
 from .saliency_maxfilter import column_max, row_max
 
 
@@ -126,7 +126,7 @@ def multi_frame_lef_rows(c: ti.i32, y: ti.i32, y0: ti.i32, y1: ti.i32, args: ti.
 def accumulate_lef(f: ti.template(), zs: ti.i32, src: ti.i32, dst: ti.i32):
     """One launch of :func:`multi_frame_lef` of frame f.z[zs], memory slot ``src`` → ``dst``, with A and γ
     from f.params32 (``f``: :class:`~.saliency_fields.SaliencyFields`)."""
-    multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, src, dst, f.ring_max, f.n_chunks,
+    multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, src, dst, f.ring_max, chunk_runs(f),
                     f.r, f.serial, image_dims(f))
 
 
@@ -144,7 +144,7 @@ def second_layer_and_lef(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, 
     threshold_and_intensity_range(f.acc2_rows, f.z_rows, zs, f.params64[0], f.params64[1], f.stats, dims[0])
     if ti.static(accumulated):
         multi_frame_lef(f.z, zs, f.d, f.params32[0], f.params32[1], f.valid, f.memory, ring[R_MEMORY_SRC],
-                        ring[R_MEMORY], f.ring_max, f.n_chunks, f.r, f.serial, dims)
+                        ring[R_MEMORY], f.ring_max, chunk_runs(f), f.r, f.serial, dims)
 
 
 # ---------------------------------------------------------------- single operators (tests, figures)
@@ -152,13 +152,14 @@ def second_layer_and_lef(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, 
 @ti.kernel
 def lef_map(z: ti.template(), zs: ti.i32, d: ti.template(), a: ti.f32, i_min: ti.f32,
             i_max: ti.f32, out: ti.template()):
-    """Likelihood estimation filter (Eqs. 25–28) at every pixel of a lane ring: log ω̌_lef (σ = 1)."""
+    """Likelihood estimation filter (Eqs. 25–28) at every pixel of a lane ring of the frame's own extents (not an
+    engine's size-class fields): log ω̌_lef (σ = 1)."""
     for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
         out[0, y, xb] = lef_log_weight(correlate_d(z, zs, d, y, xb, z.shape[1]), a, i_min, i_max)
 
 
 @ti.kernel
 def correlate_map(z: ti.template(), zs: ti.i32, d: ti.template(), out: ti.template()):
-    """z ⋆ D at every pixel of a lane ring (zero padding)."""
+    """z ⋆ D at every pixel of a lane ring of the frame's own extents (zero padding)."""
     for y, xb in ti.ndrange(z.shape[1], z.shape[2]):
         out[0, y, xb] = correlate_d(z, zs, d, y, xb, z.shape[1])

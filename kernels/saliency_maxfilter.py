@@ -10,8 +10,8 @@ import taichi as ti
 
 from .loops import light_ir
 from .saliency_fields import R_DST, R_FRAME, R_SUM_A, R_SUM_B, R_SUM_C
-from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, for_row_chunks, image_dims,
-                             lane_shift, positive_row_vector, row_vector, store_row_moments, sum_of_slots)
+from .saliency_lanes import (NEG_INF, ROW_BLOCK, VEC, VEC64, add_lane_moments, chunk_runs, for_row_chunks,
+                             image_dims, lane_shift, positive_row_vector, row_vector, store_row_moments, sum_of_slots)
 
 
 @ti.func
@@ -180,7 +180,7 @@ def accumulate_max(f: ti.template(), ring: ti.types.ndarray(dtype=ti.i32, ndim=1
     filter into f.acc_max[ring[R_DST]] (``f``: :class:`~.saliency_fields.SaliencyFields`; ``ring``:
     :func:`~.saliency_fields.ring_slots`)."""
     first_layer_sum(f.se_max, ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C], scale, f.valid, f.acc, ring[R_DST],
-                    f.line, f.ring_max, f.acc_max, f.n_chunks, f.r, f.serial, image_dims(f))
+                    f.line, f.ring_max, f.acc_max, chunk_runs(f), f.r, f.serial, image_dims(f))
 
 
 @light_ir
@@ -192,7 +192,7 @@ def frame_to_first_layer(src: ti.types.ndarray(dtype=VEC, ndim=2), f: ti.templat
     launch (``f``: :class:`~.saliency_fields.SaliencyFields`; ``ring``: :func:`~.saliency_fields.ring_slots`)."""
     zs, dims = ring[R_FRAME], image_dims(f)
     store_frame(src, f.z, zs, f.z_rows, f.serial)
-    energy_and_max(f.z, zs, f.valid, f.hs, f.hm, f.line, f.ring_max, f.se_max, zs, f.n_chunks, f.r, f.i_se, keep_i_se,
+    energy_and_max(f.z, zs, f.valid, f.hs, f.hm, f.line, f.ring_max, f.se_max, zs, chunk_runs(f), f.r, f.i_se, keep_i_se,
                    f.serial, dims)
     first_layer_sum(f.se_max, ring[R_SUM_A], ring[R_SUM_B], ring[R_SUM_C], scale, f.valid, f.acc, ring[R_DST],
-                    f.line, f.ring_max, f.acc_max, f.n_chunks, f.r, f.serial, dims)
+                    f.line, f.ring_max, f.acc_max, chunk_runs(f), f.r, f.serial, dims)

@@ -227,9 +227,11 @@ class TaichiSaliencyEngine:
         rows, columns = frame_class(self.shape)
         self.classes = (rows, columns // ks.LANES, size_class(grid.n_blocks))
         self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
-        self.n_chunks = chunk_count(self.classes[0], self.serial, backend.current().arch)
+        arch = backend.current().arch
+        self.n_chunks = chunk_count(self.shape[0], self.serial, arch)  # runs of the frame's rows
+        self.chunk_room = chunk_count(rows, self.serial, arch)  # the most runs of a frame of the class
         self.keep_i_se = False  # also store I_se (tests, figures)
-        self.f = backend.reusable(self, ("saliency", self.classes, self.r, self.n_chunks, self.serial), self._fields)
+        self.f = backend.reusable(self, ("saliency", self.classes, self.r, self.chunk_room, self.serial), self._fields)
         f = self.f
         f.params32[1] = lef_memory  # γ; snr, N and A in second_layer_and_blocks
         f.params32[2] = lef_scale
@@ -239,7 +241,8 @@ class TaichiSaliencyEngine:
                                    "row_base": padded(grid.row_base, (rows,)),
                                    "col_block": padded(grid.col_block, (lanes * ks.LANES,)),
                                    "block_offset": padded(grid.offsets, (blocks,)),
-                                   "dims": np.array([self.shape[0], self.n_lanes, self.shape[1], grid.n_blocks])})
+                                   "dims": np.array([self.shape[0], self.n_lanes, self.shape[1], grid.n_blocks,
+                                                     self.n_chunks])})
         f.block_max.fill(ks.NEG_INF)
         if backend.holds_old_values(f):  # new fields are zeros
             backend.zero_many(f, ("proposal", "n_written", "memory"))
@@ -255,12 +258,12 @@ class TaichiSaliencyEngine:
         ks, (h, lanes, nb) = self.ks, self.classes
         w = lanes * ks.LANES
         image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, lanes))  # noqa: E731
-        f = SaliencyFields(self.r, self.n_chunks, self.serial,
+        f = SaliencyFields(self.r, self.chunk_room, self.serial,
                            valid=ti.Vector.field(ks.LANES, ti.f32, shape=lanes), ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
         f.z, f.se_max, f.acc, f.acc_max = (f.ring[name] for name in ("z", "se_max", "acc", "acc_max"))
         f.params64, f.params32 = ti.field(ti.f64, shape=2), ti.field(ti.f32, shape=3)
-        f.dims = ti.field(ti.i32, shape=4)  # saliency_fields.D_*: H, V, W, blocks of the frame
-        rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.n_chunks, depth, lanes))  # noqa: E731
+        f.dims = ti.field(ti.i32, shape=5)  # saliency_fields.D_*: H, V, W, blocks, runs of rows of the frame
+        rows = lambda depth: ti.Vector.field(ks.LANES, ti.f32, shape=(self.chunk_room, depth, lanes))  # noqa: E731
         f.hs, f.hm, f.ring_max, f.line = rows(2 * self.r + 1), rows(2 * self.r + 1), rows(2 * self.r + 1), rows(1)
         f.i_se, f.acc2 = image(), image()
         f.z_rows = ti.field(ti.f64, shape=(3, h, 2))

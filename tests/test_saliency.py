@@ -33,10 +33,10 @@ def lane_out(shape, blocks):
     return ti.Vector.field(8, ti.f32, shape=(1, shape[0], blocks))
 
 
-def frame_dims(shape, blocks, n_blocks=0):
-    """The ``dims`` field of fields of the frame's own extents (saliency_fields.D_*: H, V, W, blocks)."""
-    dims = ti.field(ti.i32, shape=4)
-    dims.from_numpy(np.array([shape[0], blocks, shape[1], n_blocks], np.int32))
+def frame_dims(shape, blocks, n_chunks, n_blocks=0):
+    """The ``dims`` field of fields of the frame's own extents (saliency_fields.D_*: H, V, W, blocks, runs)."""
+    dims = ti.field(ti.i32, shape=5)
+    dims.from_numpy(np.array([shape[0], blocks, shape[1], n_blocks, n_chunks], np.int32))
     return dims
 
 
@@ -68,7 +68,7 @@ def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
     acc, dst = lane_out(shape, blocks), lane_out(shape, blocks)
     line, ring = chunk_rings(n_chunks, 2 * r + 1, blocks)
     fields = SaliencyFields(r, n_chunks, serial, se_max=src, valid=valid, acc=acc, line=line, ring_max=ring,
-                            acc_max=dst, dims=frame_dims(shape, blocks))
+                            acc_max=dst, dims=frame_dims(shape, blocks, n_chunks))
     size = 2 * r + 1
     for kind in KINDS:
         img = random_image(rng, shape, kind)
@@ -89,7 +89,8 @@ def test_energy_collection(rng, shape, chunked, monkeypatch):
         monkeypatch.setattr(backend, "SERIAL_PIXELS", 0)
         monkeypatch.setitem(saliency.CHUNK_ROWS, "cpu", 2)
     engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
-    assert engine.n_chunks == (-(-size_class(shape[0]) // 2) if chunked else 1)  # rows of the size class
+    assert engine.n_chunks == (-(-shape[0] // 2) if chunked else 1)  # runs of the frame's rows
+    assert engine.chunk_room == (-(-size_class(shape[0]) // 2) if chunked else 1)  # room for the size class's
     engine.keep_i_se = True
     for kind in KINDS:
         z = random_image(rng, shape, kind)
@@ -360,3 +361,32 @@ def test_bad_multi_frame_lef_parameters_are_a_clear_error(kw):
 
     with pytest.raises(ParameterError, match="lef_memory must be in"):
         SaliencyExtractor((8, 8), engine="numpy", **kw)
+
+
+def test_fields_reused_at_another_size_of_the_class_give_the_same_maps():
+    """An extractor at 33 × 40 on the fields a 60 × 60 extractor left (both of the 64 × 64 size class; 40 px is a
+    whole number of lane vectors, so the vector after each row is read as the row's outside), and the reverse:
+    the same thresholds, intensity ranges, proposals, N_eff and best LEF list as on fields of its own.  Without
+    ``store_frame``'s zero after each row, the 60-px frame's columns 40–47 changed the 33 × 40 threshold."""
+    import gc
+
+    frames = {shape: simulate(shape, 10, snr=2.5, seed=6).frames for shape in ((33, 40), (60, 60))}
+
+    def run(shape):
+        ext = SaliencyExtractor(shape, snr=2.5)
+        out = [o for frame in frames[shape] for o in ext.push(normalize.normalise_frame(frame).z)] + ext.flush()
+        return ext, [(o.threshold, o.i_range, o.proposal, o.n_eff, o.best_lef) for o in out]
+
+    for shape, other in (((33, 40), (60, 60)), ((60, 60), (33, 40))):
+        own, fresh = run(shape)  # kept alive: its fields are not lent
+        first, _ = run(other)
+        lent = first.engine.f
+        del first
+        gc.collect()
+        reused, maps = run(shape)
+        assert reused.engine.f is lent
+        for got, ref in zip(maps, fresh):
+            for a, b in zip(got, ref):
+                np.testing.assert_array_equal(a, b)
+        del own, reused
+        gc.collect()

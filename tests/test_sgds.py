@@ -467,6 +467,34 @@ def test_reused_fields_give_the_same_tracks(method):
     np.testing.assert_array_equal(tables_out[0], tables_out[1])
 
 
+def test_fields_reused_at_another_size_of_the_class_give_the_same_tracks():
+    """A tracker at 33 × 40 on the fields (and compiled kernels) a 60 × 60 tracker left, both of the 64 × 64 size
+    class, and the other way round: the same tracks as on fields of its own, so nothing of the larger frame's
+    values (rows, columns, pixels past the smaller frame) reaches the smaller one, nor the reverse."""
+    import gc
+
+    scenes = {shape: tbd.simulate(shape, 30, snr=2.5, seed=6) for shape in ((33, 40), (60, 60))}
+
+    def run(shape):
+        tracker = tbd.SGDSPF(shape, snr=2.5, seed=3)
+        for frame in scenes[shape].frames:
+            tracker.update(frame)
+        return tracker, tracker.finish()
+
+    for shape, other in (((33, 40), (60, 60)), ((60, 60), (33, 40))):
+        own, fresh = run(shape)  # kept alive: its fields are not lent
+        first, _ = run(other)
+        lent = (first.front.saliency.engine.f, first.search.k._target)
+        del first
+        gc.collect()  # the other size's fields go back to the spare list
+        reused, tracks = run(shape)
+        assert (reused.front.saliency.engine.f, reused.search.k._target) == lent
+        assert len(fresh) > 10
+        np.testing.assert_array_equal(tracks, fresh)
+        del own, reused
+        gc.collect()
+
+
 def test_peak_z_is_the_3x3_maximum_and_nan_outside():
     from tbd_taichi.peak_guard import peak_z
 
