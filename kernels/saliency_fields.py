@@ -7,18 +7,17 @@ import numpy as np
 
 
 class SaliencyFields:
-    """Named Taichi fields plus the constants fixed with their shapes: ``r`` (max-filter radius, px),
-    ``n_chunks`` (the chunk rings' room: the most runs of rows of the streamed filters) and ``serial``
-    (one-thread loops).  Kernels compile
-    once per object (keyed by identity), so these must not change after the first launch.  Scalars that a
+    """Named Taichi fields plus the constants fixed with their shapes: ``r`` (max-filter radius, px) and
+    ``serial`` (one-thread loops).  Kernels compile once per object (keyed by identity), so these must not
+    change after the first launch.  Scalars that a
     caller sets once live in fields: ``params64`` = [snr (Eqs. 23, 26), pixel count N],
     ``params32`` = [A (Eq. 27, σ = 1), γ (multi-frame LEF decay), lef_scale]; ``dims`` (``D_*``) = the frame's
     rows H, 8-lane vectors per row V, width W (px), blocks and runs of rows of the streamed filters, which the
     kernels read at run time: the fields are allocated at the extents of the frame's size class
     (``loops.frame_class``), so one compiled set serves a class."""
 
-    def __init__(self, r: int, n_chunks: int, serial: bool, **fields):
-        self.r, self.n_chunks, self.serial = int(r), int(n_chunks), bool(serial)
+    def __init__(self, r: int, serial: bool, **fields):
+        self.r, self.serial = int(r), bool(serial)
         self.__dict__.update(fields)
 
 

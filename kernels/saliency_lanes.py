@@ -67,7 +67,8 @@ def image_dims(f: ti.template()):
 
 @ti.func
 def chunk_runs(f: ti.template()) -> ti.i32:
-    """The runs of rows the streamed filters split the frame into (``f.dims``; at most the rings' ``f.n_chunks``)."""
+    """The runs of rows the streamed filters split the frame into (``f.dims``; at most the chunk rings' first
+    extent)."""
     return f.dims[D_CHUNKS]
 
 

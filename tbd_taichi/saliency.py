@@ -258,7 +258,7 @@ class TaichiSaliencyEngine:
         ks, (h, lanes, nb) = self.ks, self.classes
         w = lanes * ks.LANES
         image = lambda slots=1: ti.Vector.field(ks.LANES, ti.f32, shape=(slots, h, lanes))  # noqa: E731
-        f = SaliencyFields(self.r, self.chunk_room, self.serial,
+        f = SaliencyFields(self.r, self.serial,
                            valid=ti.Vector.field(ks.LANES, ti.f32, shape=lanes), ring={name: image(3) for name in ("z", "se_max", "acc", "acc_max")})
         f.z, f.se_max, f.acc, f.acc_max = (f.ring[name] for name in ("z", "se_max", "acc", "acc_max"))
         f.params64, f.params32 = ti.field(ti.f64, shape=2), ti.field(ti.f32, shape=3)

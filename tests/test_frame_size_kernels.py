@@ -130,29 +130,30 @@ def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
     assert not new, f"kernels compiled again at a new frame size: {sorted(new)}"
 
 
+def assert_built_once_per_size_class(cache: Path, script: str) -> None:
+    """``script`` at 40 × 50, then at 43 × 47 (the same 64 × 64 size class) writes no new kernel file; then at
+    70 × 37 (128 rows: another class) it writes some."""
+    run_script(cache, script, 40, 50)
+    first = kernel_files(cache)
+    run_script(cache, script, 43, 47)
+    assert kernel_files(cache) == first, "kernels compiled again within a size class"
+    run_script(cache, script, 70, 37)
+    assert kernel_files(cache) - first, "a new size class reused kernels built for another"
+
+
 def test_a_searching_pool_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """SGDS-PF's searching pool (its paired step with the tracking pool, the set-up, elimination and hand-over):
     the per-pixel tables are sized by ``pixel_class`` (40 × 50 and 43 × 47: 64 rows × 64 columns), so a new frame
     size of the class finds every kernel in the cache; a size of the next class (70 × 37: 128 rows) compiles
     again, as the exact frame size did for every size before."""
-    run_script(tmp_path, SEARCHING_AT_SIZE, 40, 50)
-    first = kernel_files(tmp_path)
-    run_script(tmp_path, SEARCHING_AT_SIZE, 43, 47)
-    assert kernel_files(tmp_path) == first, "kernels compiled again within a size class"
-    run_script(tmp_path, SEARCHING_AT_SIZE, 70, 37)
-    assert kernel_files(tmp_path) - first, "a new size class reused kernels built for another"
+    assert_built_once_per_size_class(tmp_path, SEARCHING_AT_SIZE)
 
 
 def test_sgds_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """SGDS-PF end to end (normalisation, the saliency stage, both particle pools, hand-over): at a second frame
     size of the first one's class (and block count) every kernel comes from the cache; at a size of another class
     some compile."""
-    run_script(tmp_path, SGDS_AT_SIZE, 40, 50)
-    first = kernel_files(tmp_path)
-    run_script(tmp_path, SGDS_AT_SIZE, 43, 47)
-    assert kernel_files(tmp_path) == first, "kernels compiled again within a size class"
-    run_script(tmp_path, SGDS_AT_SIZE, 70, 37)
-    assert kernel_files(tmp_path) - first, "a new size class reused kernels built for another"
+    assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE)
 
 
 def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it(tmp_path):

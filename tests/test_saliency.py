@@ -67,7 +67,7 @@ def test_max_filter_against_scipy_cv2_and_twin(rng, shape, r):
     src, valid, blocks = lane_ring(np.zeros(shape, np.float32))
     acc, dst = lane_out(shape, blocks), lane_out(shape, blocks)
     line, ring = chunk_rings(n_chunks, 2 * r + 1, blocks)
-    fields = SaliencyFields(r, n_chunks, serial, se_max=src, valid=valid, acc=acc, line=line, ring_max=ring,
+    fields = SaliencyFields(r, serial, se_max=src, valid=valid, acc=acc, line=line, ring_max=ring,
                             acc_max=dst, dims=frame_dims(shape, blocks, n_chunks))
     size = 2 * r + 1
     for kind in KINDS:
