@@ -19,7 +19,7 @@ kernels of ``tbd_taichi.methods.sgds.searching_pool.SearchingPool``); the NumPy 
 """
 import taichi as ti
 
-from .loops import frame_class
+from .loops import size_class
 from .particles import ParticleKernels
 
 # columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
@@ -28,12 +28,15 @@ N_PP_SUMS = 5
 RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, T, then the T tracked (x, y)
 
 
+PIXEL_CLASS_FLOOR = 1 << 18  # entries: every frame up to 512 × 512 px shares the per-pixel tables' class
+
+
 def pixel_class(frame_shape) -> int:
-    """Entries of a per-pixel table for frames of ``frame_shape`` (H, W): the pixels of its size class
-    (``loops.frame_class``), so that frames of one class share the table's shape, and with it the compiled
-    kernels (the kernels read the frame's size from ``frame_hw``)."""
-    rows, columns = frame_class(frame_shape)
-    return rows * columns
+    """Entries of a per-pixel table for frames of ``frame_shape`` (H, W): their pixels rounded up to a power of
+    two, at least PIXEL_CLASS_FLOOR (6 MiB of the searching pool's tables), so that frames of one class share the
+    table's shape, and with it the compiled kernels (the kernels read the frame's size from ``frame_hw``; the
+    tables are one-dimensional, indexed y·W + x, so no stride is wasted)."""
+    return max(PIXEL_CLASS_FLOOR, size_class(int(frame_shape[0]) * int(frame_shape[1])))
 
 
 @ti.data_oriented

@@ -66,9 +66,10 @@ import sys
 import numpy as np
 import tbd_taichi as tbd
 h, w = int(sys.argv[1]), int(sys.argv[2])
+blocks = dict(L_ib=int(sys.argv[3])) if len(sys.argv) > 3 else {}
 tbd.init("cpu")
 scene = tbd.simulate((h, w), 14, snr=3.0, seed=1)
-tracker = tbd.SGDSPF((h, w), snr=3.0)
+tracker = tbd.SGDSPF((h, w), snr=3.0, **blocks)
 rows = [row for frame in scene.frames for row in tracker.update(frame)]
 print(int(len(tracker.finish()) >= 0))
 """
@@ -130,30 +131,39 @@ def test_a_tracking_pool_at_a_new_frame_size_compiles_nothing(tmp_path):
     assert not new, f"kernels compiled again at a new frame size: {sorted(new)}"
 
 
-def assert_built_once_per_size_class(cache: Path, script: str) -> None:
-    """``script`` at 40 × 50, then at 43 × 47 (the same 64 × 64 size class) writes no new kernel file; then at
-    70 × 37 (128 rows: another class) it writes some."""
-    run_script(cache, script, 40, 50)
+def assert_built_once_per_size_class(cache: Path, script: str, sizes: list, other) -> None:
+    """``script`` at the first of ``sizes``, then at each other (the same size class) writes no new kernel file;
+    then at ``other`` (another class) it writes some."""
+    run_script(cache, script, *sizes[0])
     first = kernel_files(cache)
-    run_script(cache, script, 43, 47)
-    assert kernel_files(cache) == first, "kernels compiled again within a size class"
-    run_script(cache, script, 70, 37)
+    for size in sizes[1:]:
+        run_script(cache, script, *size)
+        assert kernel_files(cache) == first, f"kernels compiled again within a size class, at {size}"
+    run_script(cache, script, *other)
     assert kernel_files(cache) - first, "a new size class reused kernels built for another"
 
 
 def test_a_searching_pool_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """SGDS-PF's searching pool (its paired step with the tracking pool, the set-up, elimination and hand-over):
-    the per-pixel tables are sized by ``pixel_class`` (40 × 50 and 43 × 47: 64 rows × 64 columns), so a new frame
-    size of the class finds every kernel in the cache; a size of the next class (70 × 37: 128 rows) compiles
-    again, as the exact frame size did for every size before."""
-    assert_built_once_per_size_class(tmp_path, SEARCHING_AT_SIZE)
+    the per-pixel tables hold ``pixel_class`` entries (every frame up to 512 × 512 px: 2^18), so a new frame
+    size of the class finds every kernel in the cache (40 × 50, 43 × 47, 70 × 37, 300 × 500); a frame of more
+    pixels (520 × 520: 2^19) compiles again, as the exact frame size did for every size before."""
+    assert_built_once_per_size_class(tmp_path, SEARCHING_AT_SIZE, [(40, 50), (43, 47), (70, 37), (300, 500)],
+                                     (520, 520))
 
 
 def test_sgds_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
-    """SGDS-PF end to end (normalisation, the saliency stage, both particle pools, hand-over): at a second frame
-    size of the first one's class (and block count) every kernel comes from the cache; at a size of another class
-    some compile."""
-    assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE)
+    """SGDS-PF end to end (normalisation, the saliency stage, both particle pools, hand-over): every frame up to
+    256 × 320 (the smallest size class) with blocks of the same class (256-px blocks: 1 or 2) finds every kernel in
+    the cache; 40 × 330 (384 columns: another class of the saliency stage) compiles some."""
+    assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE, [(40, 50), (43, 47), (70, 37), (250, 300)], (40, 330))
+
+
+def test_sgds_at_another_block_count_of_its_class_compiles_nothing(tmp_path):
+    """The searching pool holds the blocks' size class of searching PFs (a power of two), the spare ones empty,
+    and the saliency stage's block fields the same class: 43 × 47 and 64 × 64 with 20-px blocks (9 and 16 blocks,
+    both of the 16-block class) share every kernel; 40 × 50 (6 blocks: the 8-block class) compiles some."""
+    assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE, [(43, 47, 20), (64, 64, 20)], (40, 50, 20))
 
 
 def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it(tmp_path):

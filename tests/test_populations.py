@@ -266,10 +266,19 @@ def test_one_launch_hand_over_engines_agree_without_tracks():
         np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)
 
 
-@pytest.mark.parametrize("shape, rows, columns", [((1, 1), 2, 64), ((40, 50), 64, 64), ((64, 64), 64, 64),
-                                                  ((256, 320), 256, 320), ((233, 297), 256, 320),
-                                                  ((229, 283), 256, 320), ((1025, 1030), 2048, 1088)])
-def test_pixel_class_holds_the_rows_and_columns_of_the_size_class(shape, rows, columns):
-    """The searching pool's per-pixel tables hold every pixel: rows rounded up to a power of two, columns to a
-    multiple of 64 px (``loops.frame_class``, the saliency stage's classes too)."""
-    assert frame_class(shape) == (rows, columns) and pixel_class(shape) == rows * columns >= shape[0] * shape[1]
+@pytest.mark.parametrize("shape, entries", [((1, 1), 1 << 18), ((40, 50), 1 << 18), ((256, 320), 1 << 18),
+                                            ((512, 512), 1 << 18), ((513, 512), 1 << 19), ((512, 640), 1 << 19),
+                                            ((1025, 1030), 1 << 21)])
+def test_pixel_class_holds_every_pixel_in_a_power_of_two_of_at_least_the_floor(shape, entries):
+    """The searching pool's per-pixel tables hold every pixel: the pixel count rounded up to a power of two, at
+    least 2^18 (512 × 512 px), so every frame up to that area shares one class."""
+    assert pixel_class(shape) == entries >= shape[0] * shape[1]
+
+
+@pytest.mark.parametrize("shape, rows, columns", [((1, 1), 256, 320), ((40, 50), 256, 320), ((233, 297), 256, 320),
+                                                  ((256, 320), 256, 320), ((100, 330), 256, 384),
+                                                  ((257, 321), 512, 384), ((1025, 1030), 2048, 1088)])
+def test_frame_class_rounds_rows_to_a_power_of_two_and_columns_to_64_px(shape, rows, columns):
+    """The saliency stage's size classes (``loops.frame_class``): at least 256 × 320, so every smaller frame
+    shares one class."""
+    assert frame_class(shape) == (rows, columns)

@@ -8,7 +8,7 @@ import taichi as ti
 
 from tbd_taichi import backend, normalize, saliency, simulate
 from tbd_taichi.kernels import saliency as ks
-from tbd_taichi.kernels.loops import size_class
+from tbd_taichi.kernels.loops import frame_class
 from tbd_taichi.kernels.saliency_fields import SaliencyFields, ring_slots
 from tbd_taichi.numpy_kernels import saliency as nps
 from tbd_taichi.saliency import (SaliencyExtractor, TaichiSaliencyEngine, block_grid, from_lanes, intensity_range,
@@ -90,7 +90,7 @@ def test_energy_collection(rng, shape, chunked, monkeypatch):
         monkeypatch.setitem(saliency.CHUNK_ROWS, "cpu", 2)
     engine = TaichiSaliencyEngine(shape, block_grid(shape, 8), D, 1)
     assert engine.n_chunks == (-(-shape[0] // 2) if chunked else 1)  # runs of the frame's rows
-    assert engine.chunk_room == (-(-size_class(shape[0]) // 2) if chunked else 1)  # room for the size class's
+    assert engine.chunk_room == (-(-frame_class(shape)[0] // 2) if chunked else 1)  # room for the size class's
     engine.keep_i_se = True
     for kind in KINDS:
         z = random_image(rng, shape, kind)

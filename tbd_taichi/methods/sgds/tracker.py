@@ -40,6 +40,7 @@ from ...background import DEFAULT_BACKGROUND
 from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
+from ...kernels.loops import size_class
 from ...kernels.populations import pixel_class
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
@@ -98,7 +99,9 @@ class SGDSPF(OneSequence):
                            bad_pixels=bad_pixels, engine=engine, lef_memory=p.lef_memory, lef_scale=p.lef_scale)
         self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
-        self.search = SearchingPool([p.N_sump] * self.grid.n_blocks, self.shape, seed=seed,
+        # one searching PF per block, in a pool of the blocks' size class: the spare groups stay empty (no map, no
+        # top-up), so frames of other block counts of the class share the pool's fields and compiled kernels
+        self.search = SearchingPool([p.N_sump] * size_class(self.grid.n_blocks), self.shape, seed=seed,
                                     map_capacity=pixel_class(self.shape), **common)
         self.tracks_pool = ParticlePool([p.N_tpf] * max_tracks, self.shape, seed=seed + 7919, **common)
         intensity = (max(p.snr - 2.0, 0.1), p.snr + 3.0)  # Eq. 26 as printed (σ units); see the module notes
@@ -251,13 +254,13 @@ class SGDSPF(OneSequence):
         """Algorithm 1's PF step on frame f (proposal maps, Eqs. 34–36, §2.1) and, in the same launch, Algorithm
         2's for the active tracks.  Returns the searching particles' Seq (state order) and the tracking PFs'
         estimates (None without active tracks)."""
-        p, pool, grid = self.p, self.search, self.grid
+        p, pool = self.p, self.search
         proposal = front.proposal
         self._suppress_tracked(proposal)
         support = proposal > 0
         maps = self._proposal_maps(proposal, support)
         pool.set_proposal_map(maps, self._labels(support))
-        has_map = np.zeros(grid.n_blocks, bool)
+        has_map = np.zeros(pool.n_groups, bool)  # the spare groups of the blocks' class have none
         has_map[list(maps)] = True
         top_up = np.where(has_map, p.N_sump, pool.counts)
         if not self.active and not pool.pairs_with(self.tracks_pool):
