@@ -145,11 +145,11 @@ def assert_built_once_per_size_class(cache: Path, script: str, sizes: list, othe
 
 def test_a_searching_pool_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """SGDS-PF's searching pool (its paired step with the tracking pool, the set-up, elimination and hand-over):
-    the per-pixel tables hold ``pixel_class`` entries (every frame up to 512 × 512 px: 2^18), so a new frame
-    size of the class finds every kernel in the cache (40 × 50, 43 × 47, 70 × 37, 300 × 500); a frame of more
-    pixels (520 × 520: 2^19) compiles again, as the exact frame size did for every size before."""
-    assert_built_once_per_size_class(tmp_path, SEARCHING_AT_SIZE, [(40, 50), (43, 47), (70, 37), (300, 500)],
-                                     (520, 520))
+    the per-pixel tables hold ``pixel_class`` entries (every frame up to 724 × 724 px: 2^19), so a new frame
+    size of the class finds every kernel in the cache (40 × 50, 43 × 47, 70 × 37, 512 × 640); a frame of more
+    pixels (730 × 730: 2^20) compiles again, as the exact frame size did for every size before."""
+    assert_built_once_per_size_class(tmp_path, SEARCHING_AT_SIZE, [(40, 50), (43, 47), (70, 37), (512, 640)],
+                                     (730, 730))
 
 
 def test_sgds_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
@@ -160,9 +160,10 @@ def test_sgds_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
 
 
 def test_sgds_at_another_block_count_of_its_class_compiles_nothing(tmp_path):
-    """The searching pool holds the blocks' size class of searching PFs (a power of two), the spare ones empty,
-    and the saliency stage's block fields the same class: 43 × 47 and 64 × 64 with 20-px blocks (9 and 16 blocks,
-    both of the 16-block class) share every kernel; 40 × 50 (6 blocks: the 8-block class) compiles some."""
+    """The searching pool holds the blocks' class of searching PFs (``block_class``: a power of two, at least
+    8), the spare ones empty, and the saliency stage's block fields a power of two: 43 × 47 and 64 × 64 with
+    20-px blocks (9 and 16 blocks, both of the 16-block class) share every kernel; 40 × 50 (6 blocks: the 8-block
+    class) compiles some."""
     assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE, [(43, 47, 20), (64, 64, 20)], (40, 50, 20))
 
 

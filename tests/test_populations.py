@@ -5,7 +5,7 @@ import pytest
 
 from tbd_taichi.errors import ParameterError
 from tbd_taichi.kernels.loops import frame_class
-from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, pixel_class
+from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, block_class, pixel_class
 from tbd_taichi.numpy_kernels.populations import spread_removal
 from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
 from tbd_taichi.methods.sgds.searching_pool import SearchingPool
@@ -266,13 +266,18 @@ def test_one_launch_hand_over_engines_agree_without_tracks():
         np.testing.assert_array_equal(out["taichi"][3][key], out["numpy"][3][key], err_msg=key)
 
 
-@pytest.mark.parametrize("shape, entries", [((1, 1), 1 << 18), ((40, 50), 1 << 18), ((256, 320), 1 << 18),
-                                            ((512, 512), 1 << 18), ((513, 512), 1 << 19), ((512, 640), 1 << 19),
+@pytest.mark.parametrize("shape, entries", [((1, 1), 1 << 19), ((40, 50), 1 << 19), ((256, 320), 1 << 19),
+                                            ((512, 640), 1 << 19), ((724, 724), 1 << 19), ((725, 724), 1 << 20),
                                             ((1025, 1030), 1 << 21)])
 def test_pixel_class_holds_every_pixel_in_a_power_of_two_of_at_least_the_floor(shape, entries):
     """The searching pool's per-pixel tables hold every pixel: the pixel count rounded up to a power of two, at
-    least 2^18 (512 × 512 px), so every frame up to that area shares one class."""
+    least 2^19 (724 × 724 px), so every frame up to that area shares one class."""
     assert pixel_class(shape) == entries >= shape[0] * shape[1]
+
+
+@pytest.mark.parametrize("blocks, groups", [(1, 8), (2, 8), (6, 8), (8, 8), (9, 16), (12, 16), (16, 16), (17, 32)])
+def test_block_class_is_a_power_of_two_of_at_least_8(blocks, groups):
+    assert block_class(blocks) == groups
 
 
 @pytest.mark.parametrize("shape, rows, columns", [((1, 1), 256, 320), ((40, 50), 256, 320), ((233, 297), 256, 320),

@@ -40,8 +40,7 @@ from ...background import DEFAULT_BACKGROUND
 from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
-from ...kernels.loops import size_class
-from ...kernels.populations import pixel_class
+from ...kernels.populations import block_class, pixel_class
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table
@@ -99,9 +98,8 @@ class SGDSPF(OneSequence):
                            bad_pixels=bad_pixels, engine=engine, lef_memory=p.lef_memory, lef_scale=p.lef_scale)
         self.grid = self.front.grid
         common = dict(engine=engine, q1=p.q1, q2=p.q2, psf_sigma=p.psf_sigma, noise_sigma=p.noise_sigma)
-        # one searching PF per block, in a pool of the blocks' size class: the spare groups stay empty (no map, no
-        # top-up), so frames of other block counts of the class share the pool's fields and compiled kernels
-        self.search = SearchingPool([p.N_sump] * size_class(self.grid.n_blocks), self.shape, seed=seed,
+        # one searching PF per block, in a pool of the blocks' class: the spare groups stay empty (no map, no top-up)
+        self.search = SearchingPool([p.N_sump] * block_class(self.grid.n_blocks), self.shape, seed=seed,
                                     map_capacity=pixel_class(self.shape), **common)
         self.tracks_pool = ParticlePool([p.N_tpf] * max_tracks, self.shape, seed=seed + 7919, **common)
         intensity = (max(p.snr - 2.0, 0.1), p.snr + 3.0)  # Eq. 26 as printed (σ units); see the module notes
