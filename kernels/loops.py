@@ -1,4 +1,5 @@
-"""Loop layout shared by the kernel modules."""
+"""Loop layout and size classes shared by the kernel modules."""
+import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
@@ -44,3 +45,14 @@ def frame_class(frame_shape) -> tuple[int, int]:
     rows, columns = FRAME_CLASS_FLOOR
     return (max(size_class(int(frame_shape[0])), rows),
             max(COLUMN_CLASS * -(-int(frame_shape[1]) // COLUMN_CLASS), columns))
+
+
+def in_corner(array: np.ndarray, shape) -> np.ndarray:
+    """``array`` itself (contiguous) if it has ``shape``, else ``array`` in the leading corner of zeros of ``shape``:
+    a frame, or a table that follows it, in a field of its size class."""
+    array = np.asarray(array)
+    if array.shape == tuple(shape):
+        return np.ascontiguousarray(array)
+    out = np.zeros(shape, array.dtype)
+    out[tuple(slice(0, n) for n in array.shape)] = array
+    return out

@@ -30,7 +30,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .loops import light_ir, thread_span
+from .loops import in_corner, light_ir, thread_span
 from .particles.layout import first_above
 from .rng import NormalTables, SharedTables, key_prefix, normals_at, table_field, uniform_at
 
@@ -98,11 +98,13 @@ def erf(x: ti.f32, table: ti.template()) -> ti.f32:
 
 @ti.data_oriented
 class PhdKernels:
-    """The pool's fields (``capacity`` slots, ``max_groups`` groups, frames of ``shape``) and its steps."""
+    """The pool's fields (``capacity`` slots, ``max_groups`` groups) and its steps.  The per-pixel fields (the
+    frames, the birth cells, Ψ) are one-dimensional, ``pixels`` entries (the frames' size class) holding a frame
+    row after row at its own width (cell y·W + x), and the kernels read the frame's (H, W) from ``frame_hw``, so
+    one compiled set serves every frame size up to ``pixels``."""
 
-    def __init__(self, capacity: int, max_groups: int, shape, serial: bool = False):
-        self.capacity, self.max_groups, self.shape = int(capacity), int(max_groups), (int(shape[0]), int(shape[1]))
-        h, w = self.shape
+    def __init__(self, capacity: int, max_groups: int, pixels: int, serial: bool = False):
+        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), int(pixels)
         c, g = self.capacity, self.max_groups
         self.state = ti.field(ti.f32, (c, DIM))
         self.state2 = ti.field(ti.f32, (c, DIM))
@@ -117,13 +119,14 @@ class PhdKernels:
         self.gint, self.gflt = ti.field(ti.i32, (g, len(GROUP_INT))), ti.field(ti.f32, (g, len(GROUP_FLOAT)))
         self.gout = ti.field(ti.f32, (g, 3))
         self.est = ti.field(ti.f32, (g, EST_WIDTH))
-        self.psi = ti.field(ti.f32, (g, h * w))
-        self.raw, self.masked = ti.field(ti.f32, (h, w)), ti.field(ti.f32, (h, w))
-        self.cells = ti.field(ti.i32, h * w)
+        self.psi = ti.field(ti.f32, (g, self.pixels))
+        self.raw, self.masked = ti.field(ti.f32, self.pixels), ti.field(ti.f32, self.pixels)  # cell y·W + x
+        self.cells = ti.field(ti.i32, self.pixels)
         self.F, self.F_inv, self.L = (ti.field(ti.f32, (MAX_MODELS, DIM, DIM)) for _ in range(3))
         # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
         self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
         self.birth = ti.field(ti.f32, BIRTH_WIDTH)  # (e, V_max, I_min, I_max, γ/J, I_floor): propagate's
+        self.frame_hw = ti.field(ti.i32, 2)  # the frame's (H, W), px: the kernels read it at run time
         self.tables, self.erf_table = NormalTables.shared(), ErfTable.shared()
         self.span = thread_span(serial)
 
@@ -147,8 +150,8 @@ class PhdKernels:
             if first_birth <= p < first_birth + n_births:
                 self.group[p] = 0
                 c = self.cells[ti.min(ti.cast(uniform_at(kb[0], p) * n_cells, ti.i32), n_cells - 1)]
-                self.state[p, 0] = ti.cast(c % self.shape[1], ti.f32) - 0.5 + uniform_at(kb[1], p)
-                self.state[p, 2] = ti.cast(c // self.shape[1], ti.f32) - 0.5 + uniform_at(kb[2], p)
+                self.state[p, 0] = ti.cast(c % self.frame_hw[1], ti.f32) - 0.5 + uniform_at(kb[1], p)
+                self.state[p, 2] = ti.cast(c // self.frame_hw[1], ti.f32) - 0.5 + uniform_at(kb[2], p)
                 self.state[p, 1] = vmax * (2.0 * uniform_at(kb[3], p) - 1.0)
                 self.state[p, 3] = vmax * (2.0 * uniform_at(kb[4], p) - 1.0)
                 self.state[p, 4] = i_min + (i_max - i_min) * uniform_at(kb[5], p)
@@ -214,7 +217,7 @@ class PhdKernels:
     @ti.func
     def weigh_particle(self, p: ti.i32, frame: ti.template(), half: ti.template(), scale: ti.f32):
         """:meth:`likelihood` of slot p on ``frame``; windows clear of the border skip the per-pixel checks."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         x, y, inten = self.state[p, 0], self.state[p, 2], self.state[p, 4]
         col = ti.cast(ti.floor(x + 0.5), ti.i32)
         row = ti.cast(ti.floor(y + 0.5), ti.i32)
@@ -225,7 +228,7 @@ class PhdKernels:
             if half <= col < w - half and half <= row < h - half:
                 for a, b in ti.static(ti.ndrange(2 * half + 1, 2 * half + 1)):
                     hv = inten * fx[b] * fy[a]
-                    acc += hv * (frame[row + a - half, col + b - half] - 0.5 * hv)
+                    acc += hv * (frame[(row + a - half) * w + col + b - half] - 0.5 * hv)
             else:
                 for a in ti.static(range(2 * half + 1)):
                     r = row + a - half
@@ -234,7 +237,7 @@ class PhdKernels:
                             c = col + b - half
                             if 0 <= c < w:
                                 hv = inten * fx[b] * fy[a]
-                                acc += hv * (frame[r, c] - 0.5 * hv)
+                                acc += hv * (frame[r * w + c] - 0.5 * hv)
             self.cell[p] = row * w + col
             self.loglik[p] = acc
         else:
@@ -277,7 +280,6 @@ class PhdKernels:
     @ti.func
     def update_group(self, g: ti.i32, lam: ti.f32, on_likelihood: ti.i32, th: ti.f32, miss: ti.f32):
         """:meth:`update` for group g, in this thread."""
-        w = ti.static(self.shape[1])
         a, b = self.segment(g)
         m = ti.f32(LOG_ZERO)
         for p in range(a, b):
@@ -285,7 +287,7 @@ class PhdKernels:
         m = ti.min(m, ti.log(lam) + SHIFT_MAX)
         src = self.gint[g, FRAME]
         for p in range(a, b):  # ℓ' kept in cdf until the next pass overwrites it
-            if self.measured(self.cell[p], src, th, w):
+            if self.measured(self.cell[p], src, th):
                 lk = self.scaled_ratio(p, m)
                 self.cdf[p] = lk
                 self.psi[g, self.cell[p]] += self.weight[p] * lk
@@ -295,7 +297,7 @@ class PhdKernels:
         n_hat, cum, top = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
         for p in range(a, b):
             wt, rho, mass = ti.f32(0.0), ti.f32(0.0), ti.f32(0.0)
-            if self.measured(self.cell[p], src, th, w):
+            if self.measured(self.cell[p], src, th):
                 lk = self.cdf[p]
                 psi = self.psi[g, self.cell[p]]
                 mass = psi / (lam_m + psi)
@@ -328,12 +330,11 @@ class PhdKernels:
         return self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
 
     @ti.func
-    def measured(self, cell: ti.i32, src: ti.i32, th: ti.f32, w: ti.template()) -> ti.i32:
+    def measured(self, cell: ti.i32, src: ti.i32, th: ti.f32) -> ti.i32:
         """Whether ``cell`` (row·W + col; −1 outside) is a measurement: z ≥ th on frame ``src`` (0 raw, 1 masked)."""
         out = 0
         if cell >= 0:
-            r, c = cell // w, cell % w
-            zv = self.masked[r, c] if src == 1 else self.raw[r, c]
+            zv = self.masked[cell] if src == 1 else self.raw[cell]
             out = ti.cast(zv >= th, ti.i32)
         return out
 
@@ -347,7 +348,7 @@ class PhdKernels:
         NO_CENTRE).  Writes the class's mass Σw̃, its w̃-weighted mean and covariance and each model's w̃ share
         (Eq. 35's L_{k,r}/L_k in expectation over the resampling); a class with Σw̃ = 0 uses equal weights, an
         empty one gives mass 0 and a zero mean."""
-        w = ti.static(self.shape[1])
+        w = self.frame_hw[1]
         a, b = self.segment(g)
         gx, gy, gate = self.gflt[g, CX], self.gflt[g, CY], self.gflt[g, RADIUS]
         best, peak = ti.f32(-1.0), -1
@@ -432,15 +433,15 @@ class PhdKernels:
     def mask(self, first_group: ti.i32, n_groups: ti.i32, half: ti.i32, value: ti.f32):
         """masked = raw with ``value`` (I_0) over the (2·half + 1)² window around the pixel of the estimated
         position (est's x, y) of each group in [first_group, first_group + n_groups) (Eq. 36)."""
-        h, w = ti.static(self.shape)
-        for r, c in ti.ndrange(h, w):
-            self.masked[r, c] = self.raw[r, c]
+        h, w = self.frame_hw[0], self.frame_hw[1]
+        for i in range(h * w):
+            self.masked[i] = self.raw[i]
         for t, a, b in ti.ndrange(n_groups, 2 * half + 1, 2 * half + 1):
             g = first_group + t
             r = ti.cast(ti.floor(self.est[g, EST_MEAN + 2] + 0.5), ti.i32) + a - half
             c = ti.cast(ti.floor(self.est[g, EST_MEAN] + 0.5), ti.i32) + b - half
             if 0 <= r < h and 0 <= c < w:
-                self.masked[r, c] = value
+                self.masked[r * w + c] = value
 
     # ------------------------------------------------------------------ host transfers
 
@@ -465,9 +466,11 @@ class PhdKernels:
             cellmass[p] = self.cellmass[start + p]
 
     def put(self, name: str, values) -> None:
-        """Field ``name`` ← ``values`` (its whole shape)."""
+        """Field ``name`` ← ``values``: its whole shape, or for a per-pixel field a frame (H, W) or table, row after
+        row into its leading entries (zeros past them)."""
         field = getattr(self, name)
-        field.from_numpy(np.ascontiguousarray(values, dtype=_NP[field.dtype]))
+        values = np.asarray(values, dtype=_NP[field.dtype])
+        field.from_numpy(in_corner(values.ravel() if len(field.shape) == 1 else values, tuple(field.shape)))
 
     def get(self, name: str) -> np.ndarray:
         """A copy of field ``name``."""

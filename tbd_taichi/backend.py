@@ -335,6 +335,21 @@ def from_host(target, array) -> None:
     _transfer_kernel("array_to_field", array.ndim)(array, target, serial_loops(array.size))
 
 
+def from_host_leading(target, array) -> None:
+    """Copy the 1-D ``array`` (converted to the target's dtype) into the leading ``len(array)`` entries of a 1-D
+    field or NumPy array (a frame, or a table that follows it, in a field of its size class); the rest keeps its
+    values.  Fields by the typed kernel of :func:`from_host`, which loops over the array."""
+    if isinstance(target, np.ndarray):
+        target[:len(array)] = array
+        return
+    from taichi.lang.util import to_numpy_type
+
+    array = np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype))
+    if array.ndim != 1 or len(target.shape) != 1 or len(array) > target.shape[0]:
+        raise ValueError(f"array of shape {array.shape} does not fit the start of a field of shape {tuple(target.shape)}")
+    _transfer_kernel("array_to_field", 1)(array, target, serial_loops(array.size))
+
+
 BATCH_DTYPES = ("f32", "f64", "i32", "u32")  # field dtypes a batch write holds exactly in f64
 
 

@@ -32,7 +32,7 @@ from . import backend
 from .engines import check_engine
 from .errors import ParameterError
 from .io import stream_frame
-from .kernels.loops import frame_class, size_class
+from .kernels.loops import frame_class, in_corner, size_class
 from .kernels.saliency_fields import ring_slots
 from .numpy_kernels import saliency as nps
 
@@ -167,13 +167,6 @@ class NumpySaliencyEngine:
 CHUNK_ROWS = {"cpu": 64, "gpu": 4}  # rows per streamed chunk of the max filters in parallel mode
 
 
-def padded(array: np.ndarray, shape) -> np.ndarray:
-    """``array`` in the leading corner of zeros of ``shape`` (a field of the size class, :mod:`.kernels.loops`)."""
-    out = np.zeros(shape, np.asarray(array).dtype)
-    out[tuple(slice(0, n) for n in np.shape(array))] = array
-    return out
-
-
 def chunk_count(height: int, serial: bool, arch: str) -> int:
     """Runs of rows the streamed max filters split the image into: one when serial, else
     ⌈H / rows⌉ (long runs on the CPU, where halo rows cost; short ones on a GPU, for threads)."""
@@ -237,10 +230,10 @@ class TaichiSaliencyEngine:
         f.params32[2] = lef_scale
         self.params = None  # (snr, A) last written to f
         rows, lanes, blocks = self.classes
-        backend.from_host_many(f, {"valid": padded(valid, (lanes, ks.LANES)), "d": d,
-                                   "row_base": padded(grid.row_base, (rows,)),
-                                   "col_block": padded(grid.col_block, (lanes * ks.LANES,)),
-                                   "block_offset": padded(grid.offsets, (blocks,)),
+        backend.from_host_many(f, {"valid": in_corner(valid, (lanes, ks.LANES)), "d": d,
+                                   "row_base": in_corner(grid.row_base, (rows,)),
+                                   "col_block": in_corner(grid.col_block, (lanes * ks.LANES,)),
+                                   "block_offset": in_corner(grid.offsets, (blocks,)),
                                    "dims": np.array([self.shape[0], self.n_lanes, self.shape[1], grid.n_blocks,
                                                      self.n_chunks])})
         f.block_max.fill(ks.NEG_INF)
@@ -292,7 +285,7 @@ class TaichiSaliencyEngine:
 
     def put_lanes(self, field, images: np.ndarray) -> None:
         """Fill a lane-layout ring field with ``images`` (slots, H, V, 8), zero beyond the frame (tests)."""
-        field.from_numpy(padded(images, tuple(field.shape) + (images.shape[-1],)))
+        field.from_numpy(in_corner(images, tuple(field.shape) + (images.shape[-1],)))
 
     def proposal_copy(self) -> np.ndarray:
         """The last emitted frame's proposal (Eq. 33) as a host array of its own, which the caller may change."""

@@ -83,6 +83,21 @@ def test_host_copies_match_to_numpy(shape, dtype):
         backend.from_host(field, np.zeros(shape + (2,), dtype))
 
 
+@pytest.mark.parametrize("n", [0, 1, 6, 10])
+@pytest.mark.parametrize("dtype", [np.int32, np.float32])
+def test_leading_host_copies_fill_the_start_and_keep_the_rest(n, dtype):
+    """backend.from_host_leading: a frame into the start of a field (or array) of its size class."""
+    before = np.arange(10, 20).astype(dtype)
+    values = (np.arange(n) * -3).astype(dtype)
+    expected = np.concatenate([values, before[n:]])
+    for target in (ti.field(ti.lang.util.to_taichi_type(dtype), shape=10), before.copy()):
+        backend.from_host(target, before)
+        backend.from_host_leading(target, values)
+        np.testing.assert_array_equal(backend.to_host(target), expected)
+    with pytest.raises(ValueError, match="does not fit"):
+        backend.from_host_leading(ti.field(ti.f32, shape=10), np.zeros(11, np.float32))
+
+
 def test_host_copies_of_vector_fields_and_arrays():
     vec = ti.Vector.field(3, ti.f32, shape=4)
     values = np.arange(12, dtype=np.float32).reshape(4, 3)

@@ -75,6 +75,19 @@ print(int(len(tracker.finish()) >= 0))
 """
 
 
+MM_PHD_AT_SIZE = """
+import sys
+import tbd_taichi as tbd
+from tbd_taichi import methods
+h, w = int(sys.argv[1]), int(sys.argv[2])
+tbd.init("cpu")
+scene = tbd.simulate((h, w), 8, snr=3.0, seed=1)
+tracker = methods.make_tracker("mm-phd", (h, w))
+rows = [row for frame in scene.frames for row in tracker.update(frame)]
+print(int(len(tracker.finish()) >= 0))
+"""
+
+
 def cache_files(path: Path) -> set:
     return {str(p.relative_to(path)) for p in path.rglob("*") if p.is_file()}
 
@@ -174,3 +187,10 @@ def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it
     lean, plain, unmarked = (kernel_files(cache) for cache in builds.values())
     assert len(lean) == 1 and lean == plain
     assert lean != unmarked  # the light build is another build (the offline cache keys on the setting)
+
+
+def test_mm_phd_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
+    """MM-PHD's per-pixel fields (the frames, the birth cells, Ψ) hold the pixels of the frames' size class, one
+    row after another at the frame's own width, and its kernels read (H, W) from ``frame_hw``: 40 × 50, 43 × 47
+    and §5.3's 100 × 80 share every kernel; 300 × 40 (512 rows: another class) compiles some."""
+    assert_built_once_per_size_class(tmp_path, MM_PHD_AT_SIZE, [(40, 50), (43, 47), (100, 80)], (300, 40))

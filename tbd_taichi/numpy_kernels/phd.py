@@ -10,6 +10,7 @@ from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEP
                            RATIO_CAP, SHIFT_MAX,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOP, TOTAL)
+from ..kernels.loops import in_corner
 from .rng import normal, uniform
 
 F32 = np.float32
@@ -35,26 +36,33 @@ def pixel_fraction(centre, pos, scale) -> np.ndarray:
 class PhdKernels:
     """The pool of ``kernels.phd.PhdKernels`` as arrays, with the same steps."""
 
-    def __init__(self, capacity: int, max_groups: int, shape, serial: bool = False):
-        self.capacity, self.max_groups, self.shape = int(capacity), int(max_groups), (int(shape[0]), int(shape[1]))
+    def __init__(self, capacity: int, max_groups: int, pixels: int, serial: bool = False):
+        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), int(pixels)
         c, g = self.capacity, self.max_groups
-        h, w = self.shape
         self.state, self.state2 = np.zeros((c, DIM), F32), np.zeros((c, DIM), F32)
         self.model, self.model2, self.group, self.group2 = (np.zeros(c, np.int32) for _ in range(4))
         self.weight, self.weight2, self.loglik, self.wtilde, self.cdf, self.cellmass = (np.zeros(c, F32) for _ in range(6))
         self.cell = np.zeros(c, np.int32)
         self.gint, self.gflt = np.zeros((g, len(GROUP_INT)), np.int32), np.zeros((g, len(GROUP_FLOAT)), F32)
         self.gout, self.est = np.zeros((g, 3), F32), np.zeros((g, EST_WIDTH), F32)
-        self.raw, self.masked = np.zeros((h, w), F32), np.zeros((h, w), F32)
-        self.cells = np.zeros(h * w, np.int32)
+        self.raw, self.masked = np.zeros(self.pixels, F32), np.zeros(self.pixels, F32)  # cell y·W + x
+        self.cells = np.zeros(self.pixels, np.int32)
         self.F, self.F_inv, self.L = (np.zeros((MAX_MODELS, DIM, DIM), F32) for _ in range(3))
         self.model_cdf = np.zeros((MAX_MODELS + 1, MAX_MODELS), F32)
         self.birth = np.zeros(BIRTH_WIDTH, F32)
+        self.frame_hw = np.zeros(2, np.int32)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """The frame's (H, W), px (``frame_hw``; the frames fill the leading H·W entries of ``raw`` and ``masked``)."""
+        return int(self.frame_hw[0]), int(self.frame_hw[1])
 
     def put(self, name: str, values) -> None:
-        """Array ``name`` ← ``values`` (its whole shape)."""
+        """Array ``name`` ← ``values``: its whole shape, or for a per-pixel array a frame (H, W) or table, row after
+        row into its leading entries (zeros past them)."""
         target = getattr(self, name)
-        target[...] = np.asarray(values).reshape(target.shape)
+        values = np.asarray(values, target.dtype)
+        target[...] = in_corner(values.ravel() if target.ndim == 1 else values, target.shape)
 
     def slots(self, start: int, count: int) -> dict:
         """Copies of slots [start, start + count): state, model, w̃ and cell mass."""
@@ -117,7 +125,7 @@ class PhdKernels:
         scale = F32(SQRT_HALF) / F32(psf_sigma)
         fx = pixel_fraction(cols.astype(F32), x[:, None], scale) * ((cols >= 0) & (cols < w))
         fy = pixel_fraction(rows.astype(F32), y[:, None], scale) * ((rows >= 0) & (rows < h))
-        frame = self.masked if masked == 1 else self.raw
+        frame = (self.masked if masked == 1 else self.raw)[:h * w].reshape(h, w)
         z = frame[np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
         hv = inten[:, None, None] * fy[:, :, None] * fx[:, None, :]
         acc = (hv * (z - F32(0.5) * hv)).sum(axis=(1, 2), dtype=F32)
@@ -128,7 +136,8 @@ class PhdKernels:
                miss: float, radius: float) -> None:
         """Eqs. 14–16, 19, 24 per group over the measurement cells z ≥ th, and with ``radius`` > 0 the class
         estimates (:meth:`_estimate_groups`); see the kernel."""
-        frames = (self.raw.ravel(), self.masked.ravel())
+        h, w = self.shape
+        frames = (self.raw[:h * w], self.masked[:h * w])
         for g in range(first_group, first_group + n_groups):
             a, b = self.gint[g, START], self.gint[g, START] + self.gint[g, LENGTH]
             ll, cell, wgt = self.loglik[a:b], self.cell[a:b], self.weight[a:b]
@@ -205,11 +214,11 @@ class PhdKernels:
         """masked = raw with ``value`` over the windows around the groups' estimated positions (Eq. 36)."""
         h, w = self.shape
         self.masked[...] = self.raw
+        masked = self.masked[:h * w].reshape(h, w)  # a view
         est = self.est[first_group:first_group + n_groups]
         for x, y in zip(est[:, EST_MEAN], est[:, EST_MEAN + 2]):
             r, c = int(np.floor(y + F32(0.5))), int(np.floor(x + F32(0.5)))
-            self.masked[max(r - half, 0):max(min(r + half + 1, h), 0), max(c - half, 0):max(min(c + half + 1, w), 0)] \
-                = value
+            masked[max(r - half, 0):max(min(r + half + 1, h), 0), max(c - half, 0):max(min(c + half + 1, w), 0)] = value
 
     def load(self, offset: int, state: np.ndarray, model: np.ndarray, weight: float, group: int) -> None:
         """Slots [offset, offset + n) of the second buffer ← ``state`` rows and ``model``, weight ``weight``,

@@ -7,6 +7,7 @@ import numpy as np
 from ... import backend
 from ...engines import kernel_module
 from ...errors import ParameterError
+from ...kernels.loops import frame_class
 from ...launch import Launcher
 from ...kernels.phd import (CX, CY, F_SUPPORT, FRAME, GROUP_FLOAT, GROUP_INT, L_SUPPORT, LENGTH, NO_CENTRE,
                              OUT_ID, OUT_LEN, N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
@@ -53,12 +54,15 @@ class PhdPool:
     def __init__(self, shape, p: MMPHDParams, d: Derived, capacity: int, max_groups: int, seed: int,
                  engine: str, arch: str | None):
         module = kernel_module(engine, "phd", arch)
-        dims = (int(capacity), int(max_groups), tuple(int(v) for v in shape))
-        # Taichi compiles a data-oriented object's kernels once per object: a new pool takes the fields of a
-        # finished one of the same size (backend.reusable); the NumPy twin has nothing to compile
+        rows, columns = frame_class(shape)
+        dims = (int(capacity), int(max_groups), rows * columns)
+        # the per-pixel fields hold the pixels of the frames' size class and the kernels read the frame's (H, W)
+        # from frame_hw, so frames of a class share the compiled kernels; Taichi compiles a data-oriented object's
+        # kernels once per object: a new pool takes the fields of a finished one of the class (backend.reusable)
         self.k = module.PhdKernels(*dims) if engine == "numpy" else \
             Launcher(backend.reusable(self, ("phd",) + dims, lambda: module.PhdKernels(*dims)))
-        self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(shape)
+        self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(int(v) for v in shape)
+        self.k.put("frame_hw", np.array(self.shape, np.int32))
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
         check_support(ms)
@@ -74,7 +78,7 @@ class PhdPool:
     def set_frame(self, z: np.ndarray, births: bool = True) -> int:
         """The frame the filters weigh and, with ``births``, the birth cells {z ≥ Th} (Eq. 29; none: every cell,
         with newborn weight 0 this frame); returns their number."""
-        backend.from_host(self.k.raw, z)
+        backend.from_host_leading(self.k.raw, z.ravel())
         if not births:
             return 0
         cells = np.flatnonzero(z.ravel() >= self.d.threshold).astype(np.int32)
@@ -84,7 +88,7 @@ class PhdPool:
             backend.from_host(self.k.birth, self.birth)
         full = np.arange(z.size, dtype=np.int32)
         full[:cells.size] = cells
-        backend.from_host(self.k.cells, full)
+        backend.from_host_leading(self.k.cells, full)
         return int(cells.size) or z.size
 
     def layout(self, lengths, masked, qscale, centres=None, radii=None) -> int:
