@@ -18,6 +18,7 @@ import numpy as np
 import taichi as ti
 
 from ..errors import ParameterError
+from .loops import frame_class
 
 SHAPES = ("square", "disk")
 
@@ -61,13 +62,17 @@ def se_geometry(se_size: int, se_shape: str) -> tuple[np.ndarray, int, np.ndarra
 
 @ti.data_oriented
 class TophatKernels:
-    """Fields for frames of ``shape`` (H, W) and a flat SE of odd ``se_size`` and ``se_shape`` ("square"/"disk")."""
+    """Fields for frames of ``shape`` (H, W) and a flat SE of odd ``se_size`` and ``se_shape`` ("square"/"disk").
+    The images take the extents of the frame's size class (``loops.frame_class``) and the kernels read (H, W) from
+    ``frame_hw``, so frames of one class share the compiled kernels."""
 
     def __init__(self, shape, se_size: int, se_shape: str):
         self.shape = (int(shape[0]), int(shape[1]))
         self.se_size, self.se_shape = int(se_size), str(se_shape)
         self.mask, self.radius, half = se_geometry(se_size, se_shape)
-        h, w = self.shape
+        h, w = frame_class(self.shape)
+        self.frame_hw = ti.field(ti.i32, 2)  # (H, W), px
+        self.frame_hw.from_numpy(np.array(self.shape, np.int32))
         self.u = ti.field(ti.f32, (h, w))  # U, Eq. 3.5
         self.eroded = ti.field(ti.f32, (h, w))  # −(U ⊖ B)
         self.opened = ti.field(ti.f32, (h, w))  # U ∘ B, Eq. 3.8
@@ -84,14 +89,14 @@ class TophatKernels:
         self.column_max(self.eroded)  # −erosion (Eq. 3.7): the dilation of −U
         self.row_levels(self.eroded, -1.0)
         self.column_max(self.opened)  # dilation of the erosion (Eqs. 3.6, 3.8)
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         for r, c in ti.ndrange(h, w):
             out[r, c] = self.u[r, c] - self.opened[r, c]
 
     @ti.func
     def remove_row_means(self, frame: ti.template()):
         """u[r, c] = frame[r, c] − ū_r (Eqs. 3.4–3.5), ū_r summed in f64 and rounded to f32; one thread per row."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         for r in range(h):
             acc = ti.f64(0.0)
             for c in range(w):
@@ -103,7 +108,7 @@ class TophatKernels:
     @ti.func
     def row_levels(self, src: ti.template(), sign: ti.f32):
         """levels[k, r, c] = max over in-image |dx| ≤ k of sign·src[r, c + dx], for k = 0..R (cumulative)."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         for r, c in ti.ndrange(h, w):
             m = sign * src[r, c]
             self.levels[0, r, c] = m
@@ -118,7 +123,7 @@ class TophatKernels:
     def column_max(self, dst: ti.template()):
         """dst[r, c] = max over in-image row offsets dy (non-empty SE rows) of levels[half[dy], r + dy, c]: the
         flat dilation by B of the image whose row levels were built (the row dy = 0 is never empty)."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         for r, c in ti.ndrange(h, w):
             m = self.levels[self.half[self.radius], r, c]
             for i in range(self.se_size):

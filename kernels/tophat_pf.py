@@ -19,10 +19,11 @@ Alg. 5 drops it (``alive``); a dead group's slots are skipped.  Positions are px
 Sums within a group run serially in one thread (groups in parallel), so the results do not depend on the thread
 count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
 ``tbd_taichi.numpy_kernels.tophat_pf``."""
+import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
-from .loops import thread_span
+from .loops import frame_class, thread_span
 from .rng import NormalTables, key_prefix, normals_at, uniform_f64_at
 
 S_X, S_Y, S_START_X, S_START_Y, S_RESAMPLE = 0, 1, 2, 3, 4  # random streams
@@ -50,11 +51,13 @@ class TophatPFKernels:
 
     def __init__(self, groups: int, n: int, shape, ring: int):
         self.groups, self.n, self.shape, self.ring = int(groups), int(n), (int(shape[0]), int(shape[1])), int(ring)
-        h, w = self.shape
+        rows, columns = frame_class(self.shape)  # the size class: the kernels read (H, W) from frame_hw
+        self.frame_hw = ti.field(ti.i32, 2)
+        self.frame_hw.from_numpy(np.array(self.shape, np.int32))
         slots = self.groups * self.n
-        self.total = ti.field(ti.f64, (h, w))  # Σ I (Algs. 8–9)
-        self.s = ti.field(ti.f32, (h, w))  # S_k = I_k − B̂_k (counts)
-        self.row_sums = ti.field(ti.f64, (h, 2))  # Σ S, Σ S² per row
+        self.total = ti.field(ti.f64, rows * columns)  # Σ I (Algs. 8–9), pixel y·W + x
+        self.s = ti.field(ti.f32, rows * columns)  # S_k = I_k − B̂_k (counts), pixel y·W + x
+        self.row_sums = ti.field(ti.f64, (rows, 2))  # Σ S, Σ S² per row
         self.stats = ti.field(ti.f64, 2)  # σ_k, mean of S_k
         self.x, self.y = ti.field(ti.f32, slots), ti.field(ti.f32, slots)  # resampled particles
         self.xp, self.yp = ti.field(ti.f32, slots), ti.field(ti.f32, slots)  # propagated particles
@@ -82,23 +85,23 @@ class TophatPFKernels:
         self.seed[None] = seed
         for i in ti.static(range(len(CONFIG))):
             self.config[i] = values[i]
-        for r, c in self.total:
-            self.total[r, c] = 0.0
+        for i in self.total:
+            self.total[i] = 0.0
 
     # ------------------------------------------------------------------ Algs. 8–9: the background
 
     @ti.kernel
     def background(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
         """Total ← Total + I; S = I − Total/count (``count`` = frames in Total); stats = (σ, mean) of S."""
-        h, w = ti.static(self.shape)
-        for r, c in ti.ndrange(h, w):
-            t = self.total[r, c] + ti.cast(frame[r, c], ti.f64)
-            self.total[r, c] = t
-            self.s[r, c] = ti.cast(ti.cast(frame[r, c], ti.f64) - t / ti.cast(count, ti.f64), ti.f32)
-        for r in range(h):
+        h, w = self.frame_hw[0], self.frame_hw[1]
+        for r in range(h):  # a row per iteration: no division of a flat index by the run-time width
             a, b = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             for c in range(w):
-                v = ti.cast(self.s[r, c], ti.f64)
+                t = self.total[r * w + c] + ti.cast(frame[r, c], ti.f64)
+                self.total[r * w + c] = t
+                sv = ti.cast(ti.cast(frame[r, c], ti.f64) - t / ti.cast(count, ti.f64), ti.f32)
+                self.s[r * w + c] = sv
+                v = ti.cast(sv, ti.f64)
                 a += v
                 b += v * v
             self.row_sums[r, 0] = a
@@ -239,7 +242,7 @@ class TophatPFKernels:
     def propagate_and_weigh(self, g: ti.i32, p: ti.i32, keys, k, motion: ti.i32) -> ti.f32:
         """Particle p of group g: x_k = x_{k−1} + B + C·n (Eq. 3.2) into (xp, yp); returns its log-weight
         (Eqs. 3.14 and 3.16); ``keys``: :meth:`noise_keys`, ``k``: :meth:`weigh_constants`."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         tw, tk, tphi = ti.static(self.tables.w, self.tables.k, self.tables.phi)
         bx, by = self.drift[g, 0], self.drift[g, 1]
         nx, ny = normals_at(tw, tk, tphi, [keys[0], keys[1]], p)
@@ -252,7 +255,7 @@ class TophatPFKernels:
         lw = ti.f32(NEG_INF)
         if 0 <= col < w and 0 <= row < h:
             z = self.ref[g]
-            lw = (z * self.s[row, col] - 0.5 * z * z) * k[1]  # Eq. 3.14 over the noise density
+            lw = (z * self.s[row * w + col] - 0.5 * z * z) * k[1]  # Eq. 3.14 over the noise density
             if motion != 0:  # Eq. 3.16, Δv = B, v = pixel(x_k) − x̂_{k−1}
                 dx = bx - (ti.cast(col, ti.f32) - self.summary[g, SUM_X])
                 dy = by - (ti.cast(row, ti.f32) - self.summary[g, SUM_Y])
@@ -330,7 +333,8 @@ class TophatPFKernels:
     def estimate(self, g: ti.i32, since: ti.i32, drift: ti.i32):
         """Group g: systematic resampling (``resample_group``), x̂ = mean of the resampled particles, S_k and
         S_k/σ_k at its pixel, and the drift B = (x̂_k − x̂_{k−m})/m, m = min(S, since) (Alg. 6), while ``drift``."""
-        n, h, w, ring = ti.static(self.n, self.shape[0], self.shape[1], self.ring)
+        n, ring = ti.static(self.n, self.ring)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         sigma = ti.cast(self.stats[0], ti.f32)
         s_drift = ti.cast(self.config[2], ti.i32)
         sums = self.resample_group(g)
@@ -339,8 +343,8 @@ class TophatPFKernels:
         row = ti.min(ti.max(ti.cast(ti.floor(ey + 0.5), ti.i32), 0), h - 1)
         self.summary[g, SUM_X] = ex
         self.summary[g, SUM_Y] = ey
-        self.summary[g, SUM_S] = self.s[row, col]
-        self.summary[g, SUM_SNR] = self.s[row, col] / ti.max(sigma, 1e-30)
+        self.summary[g, SUM_S] = self.s[row * w + col]
+        self.summary[g, SUM_SNR] = self.s[row * w + col] / ti.max(sigma, 1e-30)
         slot = since % ring
         self.ring_xy[g, slot, 0] = ex
         self.ring_xy[g, slot, 1] = ey

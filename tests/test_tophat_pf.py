@@ -35,7 +35,17 @@ def kernels(engine: str, groups: int, n: int, shape, ring: int, seed: int = 0, c
 
 
 def read(k, name: str) -> np.ndarray:
-    return backend.to_host(getattr(k, name))
+    """Field or array ``name``; the per-pixel ones as (H, W) (the Taichi fields hold its size class's pixels,
+    the frame's first, and what lies past the frame must stay 0)."""
+    out = backend.to_host(getattr(k, name))
+    h, w = k.shape
+    if name in ("total", "s"):  # the frame's pixels row after row at its own width
+        assert not out.ravel()[h * w:].any(), f"{name} written past the frame"
+        return out.ravel()[:h * w].reshape(h, w)
+    if name == "row_sums":
+        assert not out[h:].any(), f"{name} written past the frame"
+        return out[:h]
+    return out
 
 
 # ------------------------------------------------------------------ 1. the kernels against the NumPy twin

@@ -113,8 +113,8 @@ class TophatPFTracker(OneSequence):
     def _start(self) -> None:
         """Frame 3: each candidate's reference z = the 3×3 maximum of S_3 around it (the candidate pixel itself
         holds the target's negative ghost), and its particles."""
-        s = backend.to_host(self.k.s)
         h, w = self.shape
+        s = backend.to_host(self.k.s)[:h * w].reshape(h, w)  # the NumPy twin's (H, W) too
         init = np.zeros((self.p.max_candidates, 3), np.float32)
         for g, (x, y, _) in enumerate(self.candidates):
             c, r = int(x), int(y)
