@@ -36,10 +36,23 @@ COLUMN_CLASS = 64  # px: frame_class rounds the width up to a multiple of this (
 FRAME_CLASS_FLOOR = (256, 320)  # (rows, columns): the smallest class, a common thermal sensor's frame (and warmup's)
 
 
+BLOCK_CLASS_FLOOR = 8  # search blocks: every frame of up to 8 (1024 × 512 at 256-px blocks) shares a block class
+
+
+def block_class(n_blocks: int) -> int:
+    """The size class of SGDS-PF's ``n_blocks`` search blocks: a power of two, at least BLOCK_CLASS_FLOOR.  The
+    searching pool holds this many searching PFs (the groups past the blocks stay empty) and the saliency stage's
+    block fields this many entries, so frames of other block counts of the class share their fields and compiled
+    kernels.  Each spare group holds N_sump slots of memory; an empty group costs next to nothing per step
+    (docs/performance.md, "A new frame size")."""
+    return max(size_class(n_blocks), BLOCK_CLASS_FLOOR)
+
+
 def frame_class(frame_shape) -> tuple[int, int]:
     """(rows, columns) of the size class of frames of ``frame_shape`` (H, W): H rounded up by :func:`size_class`
     and W up to a multiple of COLUMN_CLASS, each at least FRAME_CLASS_FLOOR's, so that every frame up to
-    256 × 320 shares one class; SGDS-PF's saliency fields take these extents.  Rows past H cost only memory (no
+    256 × 320 shares one class; SGDS-PF's saliency fields, top-hat + PF's images and (as a pixel count) MM-PHD's
+    per-pixel fields take these extents.  Rows past H cost only memory (no
     loop reaches them), but the columns set the row stride: rounded up to a power of two (512 px for 320) they
     made the saliency kernels 10–15 % slower."""
     rows, columns = FRAME_CLASS_FLOOR
@@ -56,3 +69,22 @@ def in_corner(array: np.ndarray, shape) -> np.ndarray:
     out = np.zeros(shape, array.dtype)
     out[tuple(slice(0, n) for n in array.shape)] = array
     return out
+
+
+class FrameSize:
+    """Mixin of the kernel classes whose frame-sized fields take the extents of the frame's size class: the frame's
+    (H, W), px, in the field ``frame_hw``, which their kernels read at run time."""
+
+    def frame_size_field(self, shape) -> tuple[int, int]:
+        """Make ``frame_hw`` for frames of ``shape``; returns their size class (rows, columns)."""
+        self.frame_hw = ti.field(ti.i32, 2)
+        self.frame_extents = frame_class(shape)
+        self.set_frame_size(shape)
+        return self.frame_extents
+
+    def set_frame_size(self, shape) -> None:
+        """The frames are now of ``shape``, of the fields' size class (fields reused by another tracker)."""
+        if frame_class(shape) != self.frame_extents:
+            raise ValueError(f"frames of {tuple(shape)} are not of the fields' size class {self.frame_extents}")
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.frame_hw.from_numpy(np.array(self.shape, np.int32))

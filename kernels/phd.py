@@ -96,6 +96,9 @@ def erf(x: ti.f32, table: ti.template()) -> ti.f32:
     return ti.select(x < 0, -y, y)
 
 
+PIXEL_FIELDS = ("raw", "masked", "cells")  # the per-pixel fields ``put`` fills from the start (cell y·W + x)
+
+
 @ti.data_oriented
 class PhdKernels:
     """The pool's fields (``capacity`` slots, ``max_groups`` groups) and its steps.  The per-pixel fields (the
@@ -466,11 +469,11 @@ class PhdKernels:
             cellmass[p] = self.cellmass[start + p]
 
     def put(self, name: str, values) -> None:
-        """Field ``name`` ← ``values``: its whole shape, or for a per-pixel field a frame (H, W) or table, row after
-        row into its leading entries (zeros past them)."""
+        """Field ``name`` ← ``values`` of its shape; a per-pixel field (PIXEL_FIELDS) takes a frame (H, W) or
+        table, row after row, into its leading entries (zeros past them)."""
         field = getattr(self, name)
         values = np.asarray(values, dtype=_NP[field.dtype])
-        field.from_numpy(in_corner(values.ravel() if len(field.shape) == 1 else values, tuple(field.shape)))
+        field.from_numpy(in_corner(values.ravel(), tuple(field.shape)) if name in PIXEL_FIELDS else values)
 
     def get(self, name: str) -> np.ndarray:
         """A copy of field ``name``."""

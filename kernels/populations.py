@@ -29,7 +29,6 @@ RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, 
 
 
 PIXEL_CLASS_FLOOR = 1 << 19  # entries: every frame up to 724 × 724 px (640 × 512 too) shares the tables' class
-BLOCK_CLASS_FLOOR = 8  # searching PFs: every frame of up to 8 search blocks (640 × 512 at 256-px blocks) shares a pool
 
 
 def pixel_class(frame_shape) -> int:
@@ -38,14 +37,6 @@ def pixel_class(frame_shape) -> int:
     table's shape, and with it the compiled kernels (the kernels read the frame's size from ``frame_hw``; the
     tables are one-dimensional, indexed y·W + x, so no stride is wasted)."""
     return max(PIXEL_CLASS_FLOOR, size_class(int(frame_shape[0]) * int(frame_shape[1])))
-
-
-def block_class(n_blocks: int) -> int:
-    """Searching PFs (groups) of a pool for ``n_blocks`` search blocks: a power of two, at least BLOCK_CLASS_FLOOR;
-    the groups past the blocks stay empty, so frames of other block counts of the class share the pool's fields
-    and compiled kernels.  Each spare group holds N_sump slots of memory; an empty group costs next to nothing
-    per step (docs/performance.md, "A new frame size")."""
-    return max(size_class(n_blocks), BLOCK_CLASS_FLOOR)
 
 
 @ti.data_oriented

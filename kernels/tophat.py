@@ -18,7 +18,7 @@ import numpy as np
 import taichi as ti
 
 from ..errors import ParameterError
-from .loops import frame_class
+from .loops import FrameSize
 
 SHAPES = ("square", "disk")
 
@@ -61,18 +61,15 @@ def se_geometry(se_size: int, se_shape: str) -> tuple[np.ndarray, int, np.ndarra
 
 
 @ti.data_oriented
-class TophatKernels:
+class TophatKernels(FrameSize):
     """Fields for frames of ``shape`` (H, W) and a flat SE of odd ``se_size`` and ``se_shape`` ("square"/"disk").
     The images take the extents of the frame's size class (``loops.frame_class``) and the kernels read (H, W) from
     ``frame_hw``, so frames of one class share the compiled kernels."""
 
     def __init__(self, shape, se_size: int, se_shape: str):
-        self.shape = (int(shape[0]), int(shape[1]))
         self.se_size, self.se_shape = int(se_size), str(se_shape)
         self.mask, self.radius, half = se_geometry(se_size, se_shape)
-        h, w = frame_class(self.shape)
-        self.frame_hw = ti.field(ti.i32, 2)  # (H, W), px
-        self.frame_hw.from_numpy(np.array(self.shape, np.int32))
+        h, w = self.frame_size_field(shape)
         self.u = ti.field(ti.f32, (h, w))  # U, Eq. 3.5
         self.eroded = ti.field(ti.f32, (h, w))  # −(U ⊖ B)
         self.opened = ti.field(ti.f32, (h, w))  # U ∘ B, Eq. 3.8

@@ -19,11 +19,10 @@ Alg. 5 drops it (``alive``); a dead group's slots are skipped.  Positions are px
 Sums within a group run serially in one thread (groups in parallel), so the results do not depend on the thread
 count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot).  The NumPy twin is
 ``tbd_taichi.numpy_kernels.tophat_pf``."""
-import numpy as np
 import taichi as ti
 from taichi.lang import impl
 
-from .loops import frame_class, thread_span
+from .loops import FrameSize, thread_span
 from .rng import NormalTables, key_prefix, normals_at, uniform_f64_at
 
 S_X, S_Y, S_START_X, S_START_Y, S_RESAMPLE = 0, 1, 2, 3, 4  # random streams
@@ -45,15 +44,13 @@ def step_layout(live: int) -> str:
 
 
 @ti.data_oriented
-class TophatPFKernels:
+class TophatPFKernels(FrameSize):
     """Fields for ``groups`` filters of ``n`` particles on frames of ``shape``, the drift's ring of ``ring``
     estimates (S + 1) and a frame sum of ``sum_dtype``."""
 
     def __init__(self, groups: int, n: int, shape, ring: int):
-        self.groups, self.n, self.shape, self.ring = int(groups), int(n), (int(shape[0]), int(shape[1])), int(ring)
-        rows, columns = frame_class(self.shape)  # the size class: the kernels read (H, W) from frame_hw
-        self.frame_hw = ti.field(ti.i32, 2)
-        self.frame_hw.from_numpy(np.array(self.shape, np.int32))
+        self.groups, self.n, self.ring = int(groups), int(n), int(ring)
+        rows, columns = self.frame_size_field(shape)  # the size class: the kernels read (H, W) from frame_hw
         slots = self.groups * self.n
         self.total = ti.field(ti.f64, rows * columns)  # Σ I (Algs. 8–9), pixel y·W + x
         self.s = ti.field(ti.f32, rows * columns)  # S_k = I_k − B̂_k (counts), pixel y·W + x
@@ -94,14 +91,15 @@ class TophatPFKernels:
     def background(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
         """Total ← Total + I; S = I − Total/count (``count`` = frames in Total); stats = (σ, mean) of S."""
         h, w = self.frame_hw[0], self.frame_hw[1]
-        for r in range(h):  # a row per iteration: no division of a flat index by the run-time width
+        if ti.static(thread_span(False) == 1):  # a GPU: a thread per pixel for S, then one per row for the sums
+            for r, c in ti.ndrange(h, w):
+                self.background_pixel(frame, r, c, w, count)
+        for r in range(h):  # on the CPU a row per iteration, S and its sums in one pass (no division by W)
             a, b = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             for c in range(w):
-                t = self.total[r * w + c] + ti.cast(frame[r, c], ti.f64)
-                self.total[r * w + c] = t
-                sv = ti.cast(ti.cast(frame[r, c], ti.f64) - t / ti.cast(count, ti.f64), ti.f32)
-                self.s[r * w + c] = sv
-                v = ti.cast(sv, ti.f64)
+                if ti.static(thread_span(False) > 1):
+                    self.background_pixel(frame, r, c, w, count)
+                v = ti.cast(self.s[r * w + c], ti.f64)
                 a += v
                 b += v * v
             self.row_sums[r, 0] = a
@@ -115,6 +113,13 @@ class TophatPFKernels:
             mean = a / (h * w)
             self.stats[0] = ti.sqrt(ti.max(b / (h * w) - mean * mean, 0.0))
             self.stats[1] = mean
+
+    @ti.func
+    def background_pixel(self, frame: ti.template(), r: ti.i32, c: ti.i32, w: ti.i32, count: ti.i32):
+        """Pixel (r, c) of :meth:`background`: Total += I, S = I − Total/count."""
+        t = self.total[r * w + c] + ti.cast(frame[r, c], ti.f64)
+        self.total[r * w + c] = t
+        self.s[r * w + c] = ti.cast(ti.cast(frame[r, c], ti.f64) - t / ti.cast(count, ti.f64), ti.f32)
 
     # ------------------------------------------------------------------ the particles
 

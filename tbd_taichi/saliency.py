@@ -32,7 +32,7 @@ from . import backend
 from .engines import check_engine
 from .errors import ParameterError
 from .io import stream_frame
-from .kernels.loops import frame_class, in_corner, size_class
+from .kernels.loops import block_class, frame_class, in_corner
 from .kernels.saliency_fields import ring_slots
 from .numpy_kernels import saliency as nps
 
@@ -218,7 +218,7 @@ class TaichiSaliencyEngine:
         # the fields' extents: each size class of the frame's (rows, lane vectors, blocks) shares one set of
         # compiled kernels, which read the true extents from f.dims
         rows, columns = frame_class(self.shape)
-        self.classes = (rows, columns // ks.LANES, size_class(grid.n_blocks))
+        self.classes = (rows, columns // ks.LANES, block_class(grid.n_blocks))
         self.serial = backend.serial_loops(self.shape[0] * self.shape[1])
         arch = backend.current().arch
         self.n_chunks = chunk_count(self.shape[0], self.serial, arch)  # runs of the frame's rows

@@ -196,6 +196,13 @@ def test_sgds_at_another_block_count_of_its_class_compiles_nothing(tmp_path):
     assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE, [(43, 47, 20), (64, 64, 20)], (40, 50, 20))
 
 
+def test_sgds_with_the_default_blocks_compiles_nothing_up_to_256_by_320(tmp_path):
+    """With the default preset's 150-px blocks, 256 × 320 (6 blocks, the class's edge) and 100 × 100 (1 block)
+    share every kernel: the saliency stage's block fields and the searching pool take ``block_class`` (8) for
+    both; 257 × 320 (512 rows: another class) compiles some."""
+    assert_built_once_per_size_class(tmp_path, SGDS_AT_SIZE, [(256, 320, 150), (100, 100, 150)], (257, 320, 150))
+
+
 def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it(tmp_path):
     builds = {mode: tmp_path / mode for mode in ("lean", "plain", "unmarked")}
     for mode, cache in builds.items():
@@ -207,9 +214,11 @@ def test_a_marked_kernel_through_the_lean_path_is_built_once_as_taichi_builds_it
 
 def test_mm_phd_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """MM-PHD's per-pixel fields (the frames, the birth cells, Ψ) hold the pixels of the frames' size class, one
-    row after another at the frame's own width, and its kernels read (H, W) from ``frame_hw``: 40 × 50, 43 × 47
-    and §5.3's 100 × 80 share every kernel; 300 × 40 (512 rows: another class) compiles some."""
-    assert_built_once_per_size_class(tmp_path, MM_PHD_AT_SIZE, [(40, 50), (43, 47), (100, 80)], (300, 40))
+    row after another at the frame's own width, and its kernels read (H, W) from ``frame_hw``: 40 × 50, 43 × 47,
+    §5.3's 100 × 80 and 256 × 320 (the class's edge) share every kernel; 257 × 320 (512 rows: another class)
+    compiles some."""
+    assert_built_once_per_size_class(tmp_path, MM_PHD_AT_SIZE, [(40, 50), (43, 47), (100, 80), (256, 320)],
+                                     (257, 320))
 
 
 def test_tophat_pf_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):

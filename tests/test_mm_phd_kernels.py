@@ -345,3 +345,17 @@ def test_births_uniform_over_thresholded_cells(engine, rng):
     assert stats.chisquare(np.bincount(k.get("model")[:n], minlength=3)[:3], BETA * n).pvalue > 1e-3
     assert np.allclose(k.get("weight")[:n], 0.05 / n)
     assert np.all(k.get("group")[:n] == 0)
+
+
+def test_put_fills_the_per_pixel_fields_from_the_start_and_checks_the_others():
+    """A frame goes row after row into the start of ``raw`` (zeros past it) on both engines; any other field takes
+    only an array of its own shape."""
+    shape = (5, 7)
+    z = np.arange(35, dtype=np.float32).reshape(shape) + 1
+    for k in make_pools(shape, capacity=16, groups=2):
+        k.put("raw", z)
+        raw = np.asarray(k.get("raw"))
+        np.testing.assert_array_equal(raw[:35], z.ravel())
+        assert not raw[35:].any()
+        with pytest.raises(ValueError):
+            k.put("gint", np.zeros((1, 1), np.int32))

@@ -468,8 +468,8 @@ def test_reused_fields_give_the_same_tracks(method):
 
 
 def test_fields_reused_at_another_size_of_the_class_give_the_same_tracks():
-    """A tracker at 33 × 40 on the fields (and compiled kernels) a 60 × 60 tracker left, both of the 64 × 64 size
-    class, and the other way round: the same tracks as on fields of its own, so nothing of the larger frame's
+    """A tracker at 33 × 40 on the fields (and compiled kernels) a 60 × 60 tracker left, both of the 256 × 320 size
+    class (one 8-block class), and the other way round: the same tracks as on fields of its own, so nothing of the larger frame's
     values (rows, columns, pixels past the smaller frame) reaches the smaller one, nor the reverse."""
     import gc
 

@@ -7,7 +7,7 @@ import numpy as np
 from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEPS, EST_COV, EST_MEAN, EST_MASS,
                            EST_PEAK, EST_PROB, EST_WIDTH, FRAME, GROUP_FLOAT, NO_CENTRE, RADIUS, erf_table_values,
                            GROUP_INT, LENGTH, LOG_ZERO, MAX_MODELS, N_HAT, OUT_ID, OUT_LEN, OUT_START, OUT_WEIGHT,
-                           RATIO_CAP, SHIFT_MAX,
+                           PIXEL_FIELDS, RATIO_CAP, SHIFT_MAX,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOP, TOTAL)
 from ..kernels.loops import in_corner
@@ -58,11 +58,11 @@ class PhdKernels:
         return int(self.frame_hw[0]), int(self.frame_hw[1])
 
     def put(self, name: str, values) -> None:
-        """Array ``name`` ← ``values``: its whole shape, or for a per-pixel array a frame (H, W) or table, row after
-        row into its leading entries (zeros past them)."""
+        """Array ``name`` ← ``values`` of its shape; a per-pixel array (PIXEL_FIELDS) takes a frame (H, W) or
+        table, row after row, into its leading entries (zeros past them)."""
         target = getattr(self, name)
         values = np.asarray(values, target.dtype)
-        target[...] = in_corner(values.ravel() if target.ndim == 1 else values, target.shape)
+        target[...] = in_corner(values.ravel(), target.shape) if name in PIXEL_FIELDS else values.reshape(target.shape)
 
     def slots(self, start: int, count: int) -> dict:
         """Copies of slots [start, start + count): state, model, w̃ and cell mass."""

@@ -40,7 +40,8 @@ from ...background import DEFAULT_BACKGROUND
 from ...errors import InputError, ParameterError
 from ...frontend import FrontEnd, FrontEndProcess, FrontFrame
 from ...kernels.particles.layout import STATE
-from ...kernels.populations import block_class, pixel_class
+from ...kernels.loops import block_class
+from ...kernels.populations import pixel_class
 from ...particles import ParticlePool
 from ...peak_guard import nearest_pixel, running_peak_z
 from ...tables import TRACK_DTYPE, make_table

@@ -12,6 +12,7 @@ from ... import backend
 from ...engines import kernel_module
 from ...errors import InputError, ParameterError
 from ...io import stream_frame
+from ...kernels.loops import frame_class
 from ...kernels.tophat_pf import SUM_BX, SUM_BY, SUM_S, SUM_SNR, SUM_X, SUM_Y, step_layout
 from ...tables import TRACK_COLUMNS, _dtype, make_table
 from ...tophat import find_candidates
@@ -71,14 +72,18 @@ class TophatPFTracker(OneSequence):
         self.seconds = {s: 0.0 for s in STAGES}
 
     def _kernels(self, concept: str, name: str, dims: tuple):
-        """The engine's ``name`` kernels of ``concept`` for ``dims``; Taichi's reused from a finished tracker of the
-        same dims (no recompilation) and launched by the lean path."""
+        """The engine's ``name`` kernels of ``concept`` for ``dims`` (the frame's shape among them); Taichi's reused
+        from a finished tracker of the same dims but for a frame of the same size class (the fields' extents; no
+        recompilation) and launched by the lean path."""
         cls = getattr(kernel_module(self.engine, concept, self.arch), name)
         if self.engine == "numpy":
             return cls(*dims)
         from ...launch import Launcher
 
-        return Launcher(backend.reusable(self, (concept,) + dims, lambda: cls(*dims)))
+        key = (concept, frame_class(self.shape)) + tuple(v for v in dims if v != self.shape)
+        fields = backend.reusable(self, key, lambda: cls(*dims))
+        fields.set_frame_size(self.shape)
+        return Launcher(fields)
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Take one raw frame; return the rows reported now."""
@@ -114,7 +119,7 @@ class TophatPFTracker(OneSequence):
         """Frame 3: each candidate's reference z = the 3×3 maximum of S_3 around it (the candidate pixel itself
         holds the target's negative ghost), and its particles."""
         h, w = self.shape
-        s = backend.to_host(self.k.s)[:h * w].reshape(h, w)  # the NumPy twin's (H, W) too
+        s = backend.to_host(self.k.s).ravel()[:h * w].reshape(h, w)  # the Taichi field holds the class's pixels
         init = np.zeros((self.p.max_candidates, 3), np.float32)
         for g, (x, y, _) in enumerate(self.candidates):
             c, r = int(x), int(y)
