@@ -75,31 +75,19 @@ print(int(len(tracker.finish()) >= 0))
 """
 
 
-MM_PHD_AT_SIZE = """
+METHOD_AT_SIZE = """
 import sys
 import tbd_taichi as tbd
 from tbd_taichi import methods
-h, w = int(sys.argv[1]), int(sys.argv[2])
+h, w, method = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 tbd.init("cpu")
-scene = tbd.simulate((h, w), 8, snr=3.0, seed=1)
-tracker = methods.make_tracker("mm-phd", (h, w))
+scene = tbd.simulate((h, w), 10, snr=8.0 if method == "tophat-pf" else 3.0, seed=1)
+tracker = methods.make_tracker(method, (h, w))
 rows = [row for frame in scene.frames for row in tracker.update(frame)]
-print(int(len(tracker.finish()) >= 0))
-"""
-
-
-TOPHAT_PF_AT_SIZE = """
-import sys
-import tbd_taichi as tbd
-from tbd_taichi import methods
-h, w = int(sys.argv[1]), int(sys.argv[2])
-tbd.init("cpu")
-scene = tbd.simulate((h, w), 10, snr=8.0, seed=1)
-tracker = methods.make_tracker("tophat-pf", (h, w))
-rows = [row for frame in scene.frames for row in tracker.update(frame)]
-assert tracker.k.live_count > 0  # the particle filters ran
-for step in ("step_by_particle", "step_by_group"):  # the step's two loop layouts (chosen by the live count)
-    getattr(tracker.k, step)(len(scene.frames), 1, 1, 1)
+if method == "tophat-pf":
+    assert tracker.k.live_count > 0  # the particle filters ran
+    for step in ("step_by_particle", "step_by_group"):  # the step's two loop layouts (chosen by the live count)
+        getattr(tracker.k, step)(len(scene.frames), 1, 1, 1)
 print(int(len(tracker.finish()) >= 0))
 """
 
@@ -217,12 +205,14 @@ def test_mm_phd_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path)
     row after another at the frame's own width, and its kernels read (H, W) from ``frame_hw``: 40 × 50, 43 × 47,
     §5.3's 100 × 80 and 256 × 320 (the class's edge) share every kernel; 257 × 320 (512 rows: another class)
     compiles some."""
-    assert_built_once_per_size_class(tmp_path, MM_PHD_AT_SIZE, [(40, 50), (43, 47), (100, 80), (256, 320)],
-                                     (257, 320))
+    sizes = [(40, 50), (43, 47), (100, 80), (256, 320)]
+    assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [size + ("mm-phd",) for size in sizes],
+                                     (257, 320, "mm-phd"))
 
 
 def test_tophat_pf_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
     """The top-hat + PF tracker's images (the top-hat's and the background's, held at the size class's extents
     or, for Total and S, row after row at the frame's width) with (H, W) read from ``frame_hw``: 40 × 50 and
     61 × 37 share every kernel; 40 × 330 (384 columns: another class) compiles some."""
-    assert_built_once_per_size_class(tmp_path, TOPHAT_PF_AT_SIZE, [(40, 50), (61, 37)], (40, 330))
+    assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [(40, 50, "tophat-pf"), (61, 37, "tophat-pf")],
+                                     (40, 330, "tophat-pf"))
