@@ -18,8 +18,9 @@ def light_ir(kernel):
     """Mark a ``@ti.kernel`` (put this decorator above it) to be compiled without Taichi's advanced IR passes
     (``advanced_optimization=False`` for its compilation only; ``tbd_taichi.light_ir`` applies the mark).
     For the large kernels whose fields are sized by the frame, so that they compile again at each new frame size:
-    there those passes took 70–85 % of the build, and the kernels ran as fast without them (docs/performance.md,
-    "A new frame size").  LLVM's own optimisation still runs; fast_math stays off, so the bits are the same."""
+    there those passes took 70–85 % of the build, and the kernels ran as fast without them
+    (docs/performance-history.md, "A new frame size").  LLVM's own optimisation still runs; fast_math stays off,
+    so the bits are the same."""
     setattr(kernel._primal, LIGHT_IR, True)
     return kernel
 
