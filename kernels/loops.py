@@ -35,8 +35,6 @@ def size_class(n: int) -> int:
 
 COLUMN_CLASS = 64  # px: frame_class rounds the width up to a multiple of this (8 of the saliency kernels' lanes)
 FRAME_CLASS_FLOOR = (256, 320)  # (rows, columns): the smallest class, a common thermal sensor's frame (and warmup's)
-
-
 BLOCK_CLASS_FLOOR = 8  # search blocks: every frame of up to 8 (1024 × 512 at 256-px blocks) shares a block class
 
 
@@ -53,9 +51,9 @@ def frame_class(frame_shape) -> tuple[int, int]:
     """(rows, columns) of the size class of frames of ``frame_shape`` (H, W): H rounded up by :func:`size_class`
     and W up to a multiple of COLUMN_CLASS, each at least FRAME_CLASS_FLOOR's, so that every frame up to
     256 × 320 shares one class; SGDS-PF's saliency fields, top-hat + PF's images and (as a pixel count) MM-PHD's
-    per-pixel fields take these extents.  Rows past H cost only memory (no
-    loop reaches them), but the columns set the row stride: rounded up to a power of two (512 px for 320) they
-    made the saliency kernels 10–15 % slower."""
+    per-pixel fields take these extents.  Rows past H cost only memory (no loop reaches them), but the columns
+    set the row stride: rounded up to a power of two (512 px for 320) they made the saliency kernels 10–15 %
+    slower."""
     rows, columns = FRAME_CLASS_FLOOR
     return (max(size_class(int(frame_shape[0])), rows),
             max(COLUMN_CLASS * -(-int(frame_shape[1]) // COLUMN_CLASS), columns))

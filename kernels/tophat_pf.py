@@ -91,13 +91,14 @@ class TophatPFKernels(FrameSize):
     def background(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), count: ti.i32):
         """Total ← Total + I; S = I − Total/count (``count`` = frames in Total); stats = (σ, mean) of S."""
         h, w = self.frame_hw[0], self.frame_hw[1]
-        if ti.static(thread_span(False) == 1):  # a GPU: a thread per pixel for S, then one per row for the sums
+        per_pixel = ti.static(thread_span(False) == 1)  # a GPU: a thread per pixel for S, then one per row for sums
+        if ti.static(per_pixel):
             for r, c in ti.ndrange(h, w):
                 self.background_pixel(frame, r, c, w, count)
         for r in range(h):  # on the CPU a row per iteration, S and its sums in one pass (no division by W)
             a, b = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             for c in range(w):
-                if ti.static(thread_span(False) > 1):
+                if ti.static(not per_pixel):
                     self.background_pixel(frame, r, c, w, count)
                 v = ti.cast(self.s[r * w + c], ti.f64)
                 a += v
