@@ -1,16 +1,17 @@
 """Particle-population bookkeeping of SGDS-PF's searching PF (Eqs. 36–38) on the particle pool.
 
-A particle population (PP) is the set of a block's particles that share a Seq (Eq. 36).  The
-host numbers the PPs (block, then Seq) and decides Eq. 37's quotas; these
-kernels do the per-particle work on the pool's own fields, so the particles' states never go
-to the host:
+A particle population (PP) is the set of a block's particles that share a Seq (Eq. 36).  The PPs are
+numbered (block, then Seq) with Eq. 37's quotas by the host, or on the device at the end of the step
+(``population_numbers``); these kernels do the per-particle work on the pool's own fields, so the particles'
+states never go to the host:
 
 * :meth:`PopulationKernels.eliminate`: Eq. 37's spread-out random elimination of ``take`` of a
   PP's particles, and Eq. 38's sums over the survivors;
 * :meth:`PopulationKernels.hand_over`: drops whole PPs (handed over, or already tracked), writes
   the index image P_pp and compacts the pool;
 * :meth:`PopulationKernels.eliminate_and_hand_over`: both in one launch, with Eq. 38's potential-target
-  test deciding which PPs are handed over or dropped (the tracker's path: no host round trip between them).
+  test deciding which PPs are handed over or dropped, and ``eliminate_and_hand_over_numbered`` for PPs numbered on
+  the device (the tracker's path: no host round trip between them, no particle's Seq on the host).
 
 Particles are addressed in *state order* (group, then slot), as ``ParticlePool.state`` lists
 them.  A mixin over the ``ParticleKernels`` fields, combined with them in :class:`SearchingKernels` (the
@@ -21,6 +22,7 @@ import taichi as ti
 
 from .loops import size_class
 from .particles import ParticleKernels
+from .population_numbers import NumberingKernels
 
 # columns of eliminate's per-PP sums over the surviving particles (Eq. 38), f64
 P_KEPT, P_KEPT_E, P_TP, P_X, P_Y = range(5)
@@ -81,20 +83,38 @@ class PopulationKernels:
         self.state_starts()
         ti.loop_config(serialize=True)
         for k in range(table.shape[1]):
-            n_k = ti.cast(table[0, k], ti.i32)
-            self.pp_size[k] = n_k
+            self.pp_size[k] = ti.cast(table[0, k], ti.i32)
             self.pp_take[k] = ti.cast(table[1, k], ti.i32)
-            self.pp_acc[k] = ti.min(ti.cast(table[2, k] * table[0, k], ti.i32), n_k - 1)
-            for c in ti.static(range(N_PP_SUMS)):
-                self.pp_sums[k, c] = 0.0
+            self.start_spread(k, table[2, k])
         self.for_states(self.remove_spread, b, arrays)
 
     @ti.func
+    def eliminate_numbered(self, b: ti.i32, phase: ti.template()):
+        """``eliminate_particles`` for the PPs that the step numbered (``NumberingKernels.number_populations``:
+        their sizes and quotas are on the device), with PP k's ``phase[k]``."""
+        self.state_starts()
+        ti.loop_config(serialize=True)
+        for k in range(phase.shape[0]):
+            self.start_spread(k, phase[k])
+        self.for_states(self.remove_spread, b, ti.static(()))
+
+    @ti.func
+    def start_spread(self, k: ti.i32, phase: ti.f64):
+        """PP k's running remainder q = min(⌊phase·size⌋, size − 1) (Eq. 37's spread) and zero sums."""
+        self.pp_acc[k] = ti.min(ti.cast(phase * ti.cast(self.pp_size[k], ti.f64), ti.i32), self.pp_size[k] - 1)
+        for c in ti.static(range(N_PP_SUMS)):
+            self.pp_sums[k, c] = 0.0
+
+    @ti.func
     def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
-        """``eliminate`` for particle s (slot i)."""
-        pp = ti.static(arrays[0])
+        """``eliminate`` for particle s (slot i); ``arrays``: (pp,) or (pp, keep), or () for the PPs the step
+        numbered."""
         sums = ti.static(self.pp_sums)
-        k = pp[s]
+        k = 0
+        if ti.static(len(arrays)):
+            k = arrays[0][s]
+        else:
+            k = self.population_of(i)
         self.state_pp[s] = k
         a = self.pp_acc[k] + self.pp_take[k]
         gone = a >= self.pp_size[k]
@@ -189,6 +209,21 @@ class PopulationKernels:
         self.hand_over_particles(b, self.pp_drop, index, counts,
                                  ti.static((self.pp_rank, self.pp_cursor, floats, ints)), True)
 
+    @ti.kernel
+    def eliminate_and_hand_over_numbered(self, b: ti.i32, phase: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                                         rule: ti.types.ndarray(dtype=ti.f64, ndim=1),
+                                         index: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                                         counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                                         outcome: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                                         floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                                         ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        """:meth:`eliminate_and_hand_over` for the PPs the step numbered on the device (each PP k's ``phase[k]``;
+        ``NumberingKernels.number_populations``), so no per-particle array comes from the host."""
+        self.eliminate_numbered(b, phase)
+        self.potential_targets(phase.shape[0], rule, outcome)
+        self.hand_over_particles(b, self.pp_drop, index, counts,
+                                 ti.static((self.pp_rank, self.pp_cursor, floats, ints)), True)
+
     @ti.func
     def potential_targets(self, n_pp: ti.i32, rule: ti.template(), outcome: ti.template()):
         """Algorithm 1's hand-over decisions from Eq. 38's sums (``pp_sums``), PP after PP in PP order: a PP with
@@ -272,7 +307,7 @@ class PopulationKernels:
 
 
 @ti.data_oriented
-class SearchingKernels(ParticleKernels, PopulationKernels):
+class SearchingKernels(ParticleKernels, PopulationKernels, NumberingKernels):
     """The particle pool's kernels with Eqs. 36–38 on its fields: SGDS-PF's searching PFs."""
 
     @staticmethod
@@ -285,3 +320,4 @@ class SearchingKernels(ParticleKernels, PopulationKernels):
         super().__init__(capacity, n_groups, n_tiles, frame_shape, map_capacity, serial, flat, split, motion,
                          likelihood)
         self.population_fields(capacity, frame_shape)
+        self.numbering_fields(capacity, n_groups)

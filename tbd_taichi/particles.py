@@ -406,44 +406,52 @@ class ParticlePool:
         self.counts = n_out
 
     def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False, top_up=None,
-             seq_out: np.ndarray | None = None) -> np.ndarray | None:
+             seq_out: np.ndarray | None = None, quota: int | None = None):
         """One full filter step on normalised frame ``z`` for every group: predict (with ``top_up``),
         weigh and resample in one launch (``z`` serves this step only; ``weigh`` keeps using the last
         ``load_frame``).  ``n_out`` defaults to the live counts after the top-up.  With ``seq_out``
         (as for :meth:`seq_in_state_order`) the same launch also reads the resampled particles' Seq,
-        and the filled front of ``seq_out`` is returned."""
+        and the filled front of ``seq_out`` is returned.  With ``quota`` (SGDS-PF's ``SearchingPool``) it numbers
+        the particle populations, Eq. 37's ``quota`` particles a group, on the device and returns their number."""
         z = self._into_border(z, self._step_z)
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(n_out, counts)
-        seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
-        # an empty seq travels as the 1-element spare (nothing is written): one compiled variant per use
-        self.k.step(frame, self.buf, counts, n_out, z, seq if seq is not None and len(seq) else self._no_seq,
-                    StepOptions.of(systematic, seq is not None, self._fused_step()))
+        out, seq = self._read_out_buffer(seq_out, quota, n_out)
+        self.k.step(frame, self.buf, counts, n_out, z, out,
+                    StepOptions.of(systematic, seq is not None, self._fused_step(), quota is not None))
         self.buf = 1 - self.buf
         self.counts = n_out
-        return seq
+        return int(out[0]) if quota is not None else seq
 
     def step_with(self, other: "ParticlePool", frame: int, z: np.ndarray, top_up=None,
-                  seq_out: np.ndarray | None = None) -> tuple[np.ndarray | None, GroupEstimates]:
-        """:meth:`step` of this pool (with ``top_up`` and ``seq_out``) and of ``other`` (its live counts) on
-        the same frame, then ``other``'s :meth:`estimates`: the same results as those three calls, in one
-        launch where the kernels allow (:meth:`pairs_with`), so the threads that share this pool's
-        groups share ``other``'s as well.  Returns (Seq as :meth:`step` returns it, ``other``'s estimates)."""
+                  seq_out: np.ndarray | None = None, quota: int | None = None) -> tuple:
+        """:meth:`step` of this pool (with ``top_up``, ``seq_out`` and ``quota``) and of ``other`` (its live
+        counts) on the same frame, then ``other``'s :meth:`estimates`: the same results as those three calls, in
+        one launch where the kernels allow (:meth:`pairs_with`), so the threads that share this pool's
+        groups share ``other``'s as well.  Returns (what :meth:`step` returns, ``other``'s estimates)."""
         if not self.pairs_with(other):
-            seq = self.step(frame, z, top_up=top_up, seq_out=seq_out)
+            read = self.step(frame, z, top_up=top_up, seq_out=seq_out, quota=quota)
             other.step(frame, z)
-            return seq, other.estimates()
+            return read, other.estimates()
         z = self._into_border(z, self._step_z)
         counts = self._topped_up(top_up)
         n_out = self._resampled_counts(None, counts)
-        seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
+        out, seq = self._read_out_buffer(seq_out, quota, n_out)
         moments = np.empty((other.n_groups, N_ESTIMATES))
         # other steps at its live counts, which its kernels hold (``n``) as every launch that changes them sets them
-        self.k.step_pair(other.k._target, frame, self.buf, other.buf, n_out, z,
-                         seq if seq is not None and len(seq) else self._no_seq, seq is not None, moments)
-        for pool, out in ((self, n_out), (other, other.counts)):
-            pool.buf, pool.counts = 1 - pool.buf, out
-        return seq, other._estimates_from(moments)
+        self.k.step_pair(other.k._target, frame, self.buf, other.buf, n_out, z, out,
+                         StepOptions.of(False, seq is not None, True, quota is not None), moments)
+        for pool, out_counts in ((self, n_out), (other, other.counts)):
+            pool.buf, pool.counts = 1 - pool.buf, out_counts
+        return int(out[0]) if quota is not None else seq, other._estimates_from(moments)
+
+    def _read_out_buffer(self, seq_out, quota, n_out: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The step's ``seq`` argument and the Seq it reads (None: none): the front of ``seq_out`` (an empty read
+        travels as the 1-element spare); a ``quota`` needs a pool that numbers populations (``SearchingPool``)."""
+        if quota is not None:
+            raise ParameterError("this pool's kernels do not number particle populations (quota)")
+        seq = None if seq_out is None else self._seq_buffer(seq_out, int(n_out.sum()))
+        return (seq if seq is not None and len(seq) else self._no_seq), seq
 
     def pairs_with(self, other: "ParticlePool") -> bool:
         """Whether :meth:`step_with` can step ``other`` in this pool's launch: both on Taichi's CPU layout with

@@ -38,7 +38,6 @@ import sys
 import numpy as np
 import tbd_taichi
 from tbd_taichi.kernels.populations import pixel_class
-from tbd_taichi.methods.sgds.populations import eliminated_per_population, slab_populations
 from tbd_taichi.methods.sgds.searching_pool import SearchingPool
 from tbd_taichi.particles import ParticlePool
 h, w = int(sys.argv[1]), int(sys.argv[2])
@@ -50,13 +49,11 @@ search.set_proposal_map({g: (pixels, np.ones(len(pixels))) for g in (0, 1)}, np.
 tracks = ParticlePool([300] * 2, (h, w), seed=2)
 tracks.configure_groups([0, 1], "copy", vmax=1.0, intensity=(1.0, 3.0))
 z = np.random.default_rng(0).standard_normal((h, w)).astype(np.float32)
-seq, index = np.empty(search.capacity, np.int32), np.zeros((h, w), np.int32)
+index = np.zeros((h, w), np.int32)
 assert search.pairs_with(tracks)
 for frame in range(3):
-    got, _ = search.step_with(tracks, frame, z, top_up=[700, 700], seq_out=seq)
-    pp_block, inverse, counts = slab_populations(search.counts, got)
-    take = eliminated_per_population(pp_block, counts, 70)
-    search.eliminate_and_hand_over(inverse, counts, take, np.full(len(counts), 0.5), index, 0.0, 0.0, [], 3.0, 1)
+    n_pp, _ = search.step_with(tracks, frame, z, top_up=[700, 700], quota=70)
+    search.eliminate_and_hand_over_numbered(np.full(n_pp, 0.5), index, 0.0, 0.0, [], 3.0, 1)
 print(int((index >= 0).all()))
 """
 

@@ -45,7 +45,8 @@ def test_the_frame_size_kernels_carry_the_mark_and_the_hand_over_does_not():
     for kernel in MARKED:
         assert getattr(kernel._primal, LIGHT_IR, False), kernel.__qualname__
     # measured slower without the advanced passes (1.2-1.3 against 1.5 ms a frame), and cheap to compile
-    assert not getattr(PopulationKernels.eliminate_and_hand_over._primal, LIGHT_IR, False)
+    for kernel in (PopulationKernels.eliminate_and_hand_over, PopulationKernels.eliminate_and_hand_over_numbered):
+        assert not getattr(kernel._primal, LIGHT_IR, False)
 
 
 def test_a_marked_kernel_compiles_without_advanced_optimisation_and_restores_the_setting(monkeypatch):

@@ -14,17 +14,20 @@ from .layout import BIRTH_STREAMS, NOISE_STREAMS, S_EXIST, S_RESAMPLE, S_RESAMPL
 @dataclass(frozen=True)
 class StepOptions:
     """The compile-time choices of ``step``: ``systematic`` resampling (else multinomial), ``read_seq`` (the
-    resampled particles' Seq into the step's ``seq``), ``fused`` (``fused_step``'s three passes).  Made by
-    :meth:`of`, one object per combination, since a launch keys a template argument by its identity."""
+    resampled particles' Seq into the step's ``seq``), ``fused`` (``fused_step``'s three passes), ``number``
+    (SGDS-PF's searching pool: the resampled particles' populations numbered on the device, ``seq[0]`` the quota
+    in and the number of populations out; ``population_numbers``).  Made by :meth:`of`, one object per
+    combination, since a launch keys a template argument by its identity."""
 
     systematic: bool = False
     read_seq: bool = False
     fused: bool = False
+    number: bool = False
 
     @staticmethod
     @lru_cache(maxsize=None)
-    def of(systematic: bool, read_seq: bool, fused: bool) -> "StepOptions":
-        return StepOptions(bool(systematic), bool(read_seq), bool(fused))
+    def of(systematic: bool, read_seq: bool, fused: bool, number: bool = False) -> "StepOptions":
+        return StepOptions(bool(systematic), bool(read_seq), bool(fused), bool(number))
 
 
 @ti.data_oriented
@@ -50,8 +53,16 @@ class StepMixin:
             self.predict_particles(values, counts)
             self.weigh_particles(values, z)
             self.resample_particles(values, n_out, options.systematic)
+        self.read_out(1 - b, seq, options)
+
+    @ti.func
+    def read_out(self, b: ti.i32, seq: ti.template(), options: ti.template()):
+        """After a step into buffer b: ``options.read_seq``, the particles' Seq in state order into ``seq``;
+        ``options.number``, their populations numbered (``seq[0]``: Eq. 37's quota in, the number out)."""
         if ti.static(options.read_seq):
-            self.seq_in_state_order(1 - b, seq)
+            self.seq_in_state_order(b, seq)
+        if ti.static(options.number):
+            self.number_populations(b, seq)
 
     @ti.func
     def fused_step(self, values: ti.template(), counts: ti.template(), z: ti.template(), n_out: ti.template(),
@@ -84,7 +95,7 @@ class StepMixin:
     @ti.kernel
     def step_pair(self, other: ti.template(), frame: ti.i32, b: ti.i32, other_b: ti.i32,
                   counts: ti.types.ndarray(dtype=ti.i32, ndim=1), z: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                  seq: ti.types.ndarray(dtype=ti.i32, ndim=1), read_seq: ti.template(),
+                  seq: ti.types.ndarray(dtype=ti.i32, ndim=1), options: ti.template(),
                   moments: ti.types.ndarray(dtype=ti.f64, ndim=2)):
         """``step`` (fused, whole groups per thread, multinomial, every group resampled to its live count
         ``counts``) of this pool and of ``other``, a second pool on the same frame z with the same motion
@@ -92,7 +103,7 @@ class StepMixin:
         ``n``), in the same pass (``stepped_group`` for each group of either pool), so the threads share
         both pools' work and the serial pool ``other`` no longer leaves a core idle; with ``other``'s
         ``estimates`` into ``moments``.  Each group is stepped as ``fused_step`` steps it, so both pools
-        get the bits of their own ``step``."""
+        get the bits of their own ``step``.  ``options``: this pool's read-out (:meth:`read_out`)."""
         self.store_counts(counts)
         other.store_counts(other.n)
         self.for_groups_with(other, self.stepped_group,
@@ -101,8 +112,7 @@ class StepMixin:
                              other.stepped_group,
                              {'values': other.step_values(frame, other_b), 'z': z, 'n_out': other.n,
                               'resampled': other.resampled_moments_tile, 'moments': moments})
-        if ti.static(read_seq):
-            self.seq_in_state_order(1 - b, seq)
+        self.read_out(1 - b, seq, options)
 
     @ti.func
     def stepped_group(self, g: ti.i32, loop: ti.template()):

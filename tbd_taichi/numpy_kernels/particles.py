@@ -282,6 +282,8 @@ class NumpyParticleKernels:
         self.resample(frame, b, n_out, options.systematic)
         if options.read_seq:
             self.read_seq(1 - b, seq)
+        if options.number:
+            self.number_populations(1 - b, seq)
 
     def resample(self, frame: int, b: int, counts: np.ndarray, systematic: bool) -> None:
         seed = self.step_values()[0]

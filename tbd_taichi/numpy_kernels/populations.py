@@ -57,6 +57,53 @@ def potential_targets(sums: np.ndarray, rule: np.ndarray):
     return (potential & near) | (rank >= 0), rank
 
 
+def slab_populations(slab_counts, seq: np.ndarray, table_limit: int = 1 << 22):
+    """:func:`populations` of particles listed block by block, ``slab_counts[g]`` of block g (the pool's state
+    order), without a per-particle block array: one bincount over a (block, Seq) table (each block's keys
+    offset by a slice), or a sort where that table would exceed ``table_limit`` entries.  Where the table
+    would be sparse (more entries than twice the particles), the Seq values present are first numbered
+    densely, in order: long-lived PPs spread the Seq range (1024×1024 at the 1.4 preset: 61,000 values,
+    4,300 of them present, 49 blocks, and 9.2 ms a frame, 3.5 ms numbered densely)."""
+    seq = np.asarray(seq)
+    if len(seq) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    slab_counts = np.asarray(slab_counts, np.int64)
+    blocks = np.flatnonzero(slab_counts)
+    lo, n_groups = int(seq.min()), int(blocks[-1]) + 1
+    span = int(seq.max()) - lo + 1
+    key = (seq - lo).astype(np.int32, copy=False) if span <= table_limit else None
+    width, first = span, 0  # table row width, first key of a row
+    if key is not None and n_groups * span > 2 * len(seq):
+        dense = np.cumsum(np.bincount(key, minlength=span) > 0, dtype=np.int32)  # 1 + dense id of each value
+        key, width, first = np.take(dense, key), int(dense[-1]), 1
+    if key is None or n_groups * width > table_limit:
+        group = np.repeat(np.arange(len(slab_counts)), slab_counts)
+        keys, code = np.unique(group * span + (seq.astype(np.int64) - lo), return_inverse=True)
+        return keys // span, code.reshape(-1), np.bincount(code.reshape(-1), minlength=len(keys))
+    ends = np.cumsum(slab_counts)
+    for g in blocks:
+        if g * width != first:
+            key[ends[g] - slab_counts[g]:ends[g]] += np.int32(g * width - first)
+    table = np.bincount(key, minlength=n_groups * width)
+    keys = np.flatnonzero(table)
+    index = np.empty(len(table), np.int32)  # PP index of each present key (every particle's key is present)
+    index[keys] = np.arange(len(keys), dtype=np.int32)
+    return keys // width, np.take(index, key), table[keys]
+
+
+def eliminated_per_population(pp_block: np.ndarray, counts: np.ndarray, per_block: int) -> np.ndarray:
+    """Eq. 37: particles to remove from each PP so that each block loses ``per_block``,
+    smallest PPs first (ties by Seq) and the last one partially."""
+    order = np.lexsort((np.arange(len(counts)), counts, pp_block))
+    c, b = counts[order], pp_block[order]
+    before = np.cumsum(c) - c
+    block_start = np.searchsorted(b, b)  # first sorted PP of the same block
+    before = before - before[block_start]
+    take = np.empty_like(counts)
+    take[order] = np.clip(per_block - before, 0, c)
+    return take
+
+
 class NumpyPopulationKernels:
     """Twin of ``PopulationKernels``; uses the ``NumpyParticleKernels`` arrays.  The slabs lie in group
     order, so the live slots in increasing order are the particles in state order."""
@@ -98,6 +145,17 @@ class NumpyPopulationKernels:
         index[y[inside][order], x[inside][order]] = seq[inside][order]
         self.keep_particles(b, keep)
         counts[:] = self.n
+
+    def number_populations(self, b, io) -> None:
+        """Twin of ``NumberingKernels.number_populations``: ``io[0]``, Eq. 37's quota in, the number of PPs out."""
+        pp_block, pp, size = slab_populations(self.n, self.seq[b, self.live_slots()])
+        self._numbered = (pp.astype(np.int32), size, eliminated_per_population(pp_block, size, int(io[0])))
+        io[0] = len(size)
+
+    def eliminate_and_hand_over_numbered(self, b, phase, rule, index, counts, outcome, floats, ints) -> None:
+        pp, size, take = self._numbered
+        self.eliminate_and_hand_over(b, pp, np.array([size, take, phase], np.float64), rule, index, counts, outcome,
+                                     floats, ints)
 
     def eliminate_and_hand_over(self, b, pp, table, rule, index, counts, outcome, floats, ints) -> None:
         sums = np.zeros((table.shape[1], N_PP_SUMS))

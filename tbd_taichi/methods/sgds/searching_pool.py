@@ -24,6 +24,31 @@ class SearchingPool(ParticlePool):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._eliminated = None  # (particles, populations) of the last eliminate, until its hand_over
+        self._numbered = None  # populations numbered by the last step (its ``quota``), until they are eliminated
+
+    def step(self, *args, **kwargs):
+        """:meth:`ParticlePool.step`; with ``quota``, its populations' number is kept for
+        :meth:`eliminate_and_hand_over_numbered`."""
+        read = super().step(*args, **kwargs)
+        self._numbered = read if kwargs.get("quota") is not None else None
+        return read
+
+    def step_with(self, *args, **kwargs):
+        """:meth:`ParticlePool.step_with`, keeping the populations' number as :meth:`step` does."""
+        read, estimates = super().step_with(*args, **kwargs)
+        self._numbered = read if kwargs.get("quota") is not None else None
+        return read, estimates
+
+    def _read_out_buffer(self, seq_out, quota, n_out: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`ParticlePool._read_out_buffer`; with ``quota``, a one-element array holding it, the step's
+        ``seq`` argument that returns the number of populations."""
+        if quota is None:
+            return super()._read_out_buffer(seq_out, quota, n_out)
+        if seq_out is not None:
+            raise ParameterError("a step reads either the particles' Seq or their populations' number, not both")
+        if int(quota) < 0:
+            raise ParameterError(f"quota must be ≥ 0 particles, got {quota}")
+        return np.array([int(quota)], np.int32), None
 
     @staticmethod
     def _kernels_class(engine: str):
@@ -43,6 +68,7 @@ class SearchingPool(ParticlePool):
         (columns ``kernels.populations.P_*``: count, count with E = 1, Σ Tp, Σ x and Σ y with E = 1).
         The pool is unchanged until :meth:`hand_over`, which must come next."""
         pp, table, n = self._population_table(pp, size, take, phase)
+        self._numbered = None
         keep = np.zeros(n, np.int8)
         sums = np.zeros((table.shape[1], N_PP_SUMS))
         if n:
@@ -84,9 +110,30 @@ class SearchingPool(ParticlePool):
         dropped, in PP order, while fewer than ``most`` are.  Returns ``hand_over``'s (states, sizes) of the
         handed PPs."""
         pp, table, n = self._population_table(pp, size, take, phase)
+        return self._decide_and_hand_over(lambda *out: self.k.eliminate_and_hand_over(self.buf, pp, table, *out),
+                                          table.shape[1], n, index, (t_ptp, t_pe, tracked, radius, most))
+
+    def eliminate_and_hand_over_numbered(self, phase, index: np.ndarray, t_ptp: float, t_pe: float, tracked,
+                                         radius: float, most: int) -> tuple[dict, list]:
+        """:meth:`eliminate_and_hand_over` of the populations that the step just before numbered on the device
+        (``step(…, quota=…)``: their particles, sizes and Eq. 37 quotas never come to the host), PP k spread by
+        ``phase[k]`` ∈ [0, 1), one per population."""
+        if self._numbered is None:
+            raise ParameterError("eliminate_and_hand_over_numbered needs a step with a quota just before")
+        n_pp = self._numbered
+        phase = np.ascontiguousarray(phase, dtype=np.float64).reshape(-1)
+        if phase.shape != (n_pp,) or ((phase < 0) | (phase >= 1)).any():
+            raise ParameterError(f"need one phase in [0, 1) per population ({n_pp}), got {phase.shape[0]}")
+        self._numbered = None
+        return self._decide_and_hand_over(lambda *out: self.k.eliminate_and_hand_over_numbered(self.buf, phase, *out),
+                                          n_pp, int(self.counts.sum()), index, (t_ptp, t_pe, tracked, radius, most))
+
+    def _decide_and_hand_over(self, launch, n_pp: int, n: int, index: np.ndarray, rule: tuple) -> tuple[dict, list]:
+        """The launch of an ``eliminate_and_hand_over`` kernel, ``launch(rule, index, counts, outcome, floats,
+        ints)``, over n particles in ``n_pp`` populations; ``rule``: (T_PTp, T_PE, tracked, radius, most)."""
         self._check_index_image(index)
         self._eliminated = None
-        n_pp = table.shape[1]
+        t_ptp, t_pe, tracked, radius, most = rule
         tracked = np.asarray(tracked, np.float64).reshape(-1, 2)
         rule = np.concatenate([[t_ptp, t_pe, radius * radius, max(int(most), 0), len(tracked)], tracked.ravel()])
         outcome = np.full((2, n_pp), -1, np.int32)  # per PP: hand-over rank, survivors
@@ -94,7 +141,7 @@ class SearchingPool(ParticlePool):
         ints = np.empty((len(INT_STATE), floats.shape[1]), np.int32)
         if n:
             counts = np.empty(self.n_groups, np.int32)
-            self.k.eliminate_and_hand_over(self.buf, pp, table, rule, index, counts, outcome, floats, ints)
+            launch(rule, index, counts, outcome, floats, ints)
             self.counts = counts
         else:
             index[...] = 0

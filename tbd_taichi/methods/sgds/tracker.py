@@ -53,7 +53,7 @@ from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK
 from ..registry import OneSequence
 from .params import SGDSParams
 from .handover import HANDOVER_STREAM, RecentFrames, engine_kernels, multi_frame_draws
-from .populations import eliminated_per_population, resize_population, slab_populations
+from .populations import resize_population
 from .searching_pool import SearchingPool
 
 MIN_FRAMES = 5
@@ -113,7 +113,6 @@ class SGDSPF(OneSequence):
         self.icef_lower = p.icef_ratio_for(pixels, ICEF_LOWER)  # Eq. 40's 0.1, scaled
         self.confirm_log_ratio = math.log(p.icef_ratio_for(pixels, p.confirm_mean_ratio))  # the long window's
         self.pp_index = np.zeros(self.shape, np.int32)  # P_pp of Eq. 36 (0: no PP)
-        self._seq = np.empty(self.search.capacity, np.int32)  # the searching particles' Seq, read each frame
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
         self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
@@ -209,12 +208,12 @@ class SGDSPF(OneSequence):
         f, z = front.frame, front.z
         self.recent.add(f, z)
         t0 = time.perf_counter()
-        seq, est = self._filter_step(f, z, front)
+        n_pp, est = self._filter_step(f, z, front)
         log_msw = self._log_msw(front)
         t0 = self._clock("searching", t0)
         rows = self._confirm_tracks(f, z, est, log_msw)
         t0 = self._clock("tracking", t0)
-        self._eliminate_and_hand_over(f, seq)
+        self._eliminate_and_hand_over(f, n_pp)
         self._clock("searching", t0)
         if self.history:
             self.online_rows += rows
@@ -251,8 +250,8 @@ class SGDSPF(OneSequence):
 
     def _filter_step(self, f: int, z: np.ndarray, front: FrontFrame):
         """Algorithm 1's PF step on frame f (proposal maps, Eqs. 34–36, §2.1) and, in the same launch, Algorithm
-        2's for the active tracks.  Returns the searching particles' Seq (state order) and the tracking PFs'
-        estimates (None without active tracks)."""
+        2's for the active tracks; the same launch numbers the searching PFs' particle populations with Eq. 37's
+        quotas.  Returns their number and the tracking PFs' estimates (None without active tracks)."""
         p, pool = self.p, self.search
         proposal = front.proposal
         self._suppress_tracked(proposal)
@@ -262,12 +261,13 @@ class SGDSPF(OneSequence):
         has_map = np.zeros(pool.n_groups, bool)  # the spare groups of the blocks' class have none
         has_map[list(maps)] = True
         top_up = np.where(has_map, p.N_sump, pool.counts)
+        quota = int(round(p.P_e * p.N_sump))  # Eq. 37: particles eliminated per block
         if not self.active and not pool.pairs_with(self.tracks_pool):
-            return pool.step(f, z, top_up=top_up, seq_out=self._seq), None
+            return pool.step(f, z, top_up=top_up, quota=quota), None
         # with no active track the tracking pool's empty groups cost next to nothing, and one kernel (step_pair)
         # then serves every frame instead of three (the searching step, the tracking step, estimates)
-        seq, est = pool.step_with(self.tracks_pool, f, z, top_up=top_up, seq_out=self._seq)
-        return seq, est if self.active else None
+        n_pp, est = pool.step_with(self.tracks_pool, f, z, top_up=top_up, quota=quota)
+        return n_pp, est if self.active else None
 
     def _log_msw(self, front: FrontFrame) -> float:
         """ln MSW for Eq. 40 (``msw_reference``), after the searching PFs' step."""
@@ -275,24 +275,21 @@ class SGDSPF(OneSequence):
             return float(self.search.max_log_weights().max())
         return msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
 
-    def _eliminate_and_hand_over(self, f: int, seq: np.ndarray) -> None:
-        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp; ``seq``: the
-        searching particles' Seq in state order (from the step).
+    def _eliminate_and_hand_over(self, f: int, n_pp: int) -> None:
+        """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp, over the ``n_pp``
+        PPs that the step numbered.
 
-        A PP is a (block, Seq) pair.  The host numbers the PPs of all blocks at once and decides the
-        quotas; the pool eliminates, applies Algorithm 1's potential-target rule (PTp > T_PTp, PE > T_PE
-        with PE = ΣE/N_pp, Eq. 38; a potential target near an active track is dropped, the others are handed
-        over while tracking PFs are free) and hands over in one launch
-        (``SearchingPool.eliminate_and_hand_over``), so only the handed-over particles' states come to the
-        host, PP after PP, each in state order."""
+        A PP is a (block, Seq) pair.  The step numbered the PPs of all blocks at once and set Eq. 37's quotas
+        on the device; the host draws each PP's phase, and the pool eliminates, applies Algorithm 1's
+        potential-target rule (PTp > T_PTp, PE > T_PE with PE = ΣE/N_pp, Eq. 38; a potential target near an
+        active track is dropped, the others are handed over while tracking PFs are free) and hands over in one
+        launch (``SearchingPool.eliminate_and_hand_over_numbered``), so only the handed-over particles' states
+        come to the host, PP after PP, each in state order."""
         p, pool = self.p, self.search
-        pp_block, inverse, counts = slab_populations(pool.counts, seq)
-        take = eliminated_per_population(pp_block, counts, int(round(p.P_e * p.N_sump)))
         rng = np.random.default_rng([self.seed, f])
         tracked = [t.last_xy() for t in self.active]
-        members, sizes = pool.eliminate_and_hand_over(inverse, counts, take, rng.random(len(counts)), self.pp_index,
-                                                      p.T_PTp, p.T_PE, tracked, DUPLICATE_RADIUS,
-                                                      len(self.free_groups))
+        members, sizes = pool.eliminate_and_hand_over_numbered(rng.random(n_pp), self.pp_index, p.T_PTp, p.T_PE,
+                                                               tracked, DUPLICATE_RADIUS, len(self.free_groups))
         self._start_tracks(f, members, sizes, rng, tracked)
 
     def _start_tracks(self, f: int, members: dict | None, sizes: list, rng: np.random.Generator,
