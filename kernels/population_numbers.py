@@ -28,11 +28,11 @@ class NumberingKernels:
     ``pp_take`` and :meth:`numbering_fields`."""
 
     def numbering_fields(self, capacity: int, n_groups: int):
-        """Per slot its hash entry; per hash entry (2 per slot, group g's at 2·off[g]) the Seq, the epoch that
-        wrote it, its particles, its PP's rank in the block and quota; per slot-range position the block's
-        distinct entries (in Seq order) and the same by (size, Seq); per group its first PP and PP count."""
+        """Per hash entry (2 per slot, group g's at 2·off[g]) the Seq, the epoch that wrote it, its particles, its
+        PP's rank in the block and quota; per slot-range position the block's distinct entries (in Seq order) and
+        the same by (size, Seq); per group its first PP and PP count."""
         i32 = lambda *shape: ti.field(ti.i32, shape=shape)  # noqa: E731
-        self.slot_entry, self.pp_by_seq, self.pp_by_size = i32(capacity), i32(capacity), i32(capacity)
+        self.pp_by_seq, self.pp_by_size = i32(capacity), i32(capacity)
         self.entry_seq, self.entry_epoch, self.entry_count = i32(2 * capacity), i32(2 * capacity), i32(2 * capacity)
         self.entry_rank, self.entry_take = i32(2 * capacity), i32(2 * capacity)
         self.group_first_pp, self.group_pps = i32(n_groups), i32(n_groups)
@@ -42,8 +42,8 @@ class NumberingKernels:
     def number_populations(self, b: ti.i32, io: ti.template()):
         """The PPs of buffer b's live particles, numbered block by block, then by Seq, with Eq. 37's quotas:
         ``io[0]`` holds the quota per block (particles) on entry and the number of PPs on return; ``pp_size``
-        and ``pp_take`` hold each PP's particles and quota, and each particle's PP is
-        :meth:`population_of` its slot."""
+        and ``pp_take`` hold each PP's particles and quota; a particle of group g with Seq q is in PP
+        ``group_first_pp[g] + entry_rank[seq_entry(g, q)]``."""
         quota = io[0]
         self.number_epoch[0] += 1
         ti.loop_config(serialize=self.serial)
@@ -61,31 +61,38 @@ class NumberingKernels:
             io[0] = first
 
     @ti.func
-    def population_of(self, i: ti.i32) -> ti.i32:
-        """The PP number of the particle in slot i (after :meth:`number_populations`)."""
-        return self.group_first_pp[self.slot_group[i]] + self.entry_rank[self.slot_entry[i]]
+    def seq_entry(self, g: ti.i32, seq: ti.i32) -> ti.i32:
+        """Group g's hash entry of ``seq``: the entry that holds it in this call's epoch, else the free entry where
+        it goes (linear probing from its hash over the group's 2·cap[g] entries, from 2·off[g] on).  A PP's
+        number is then ``group_first_pp[g] + entry_rank[entry]``."""
+        base, length = 2 * self.off[g], ti.max(2 * self.cap[g], 1)
+        h = base + ti.cast((ti.cast(seq, ti.u32) * ti.u32(HASH_MULTIPLIER)) % ti.cast(length, ti.u32), ti.i32)
+        while self.entry_epoch[h] == self.number_epoch[0] and self.entry_seq[h] != seq:
+            h = ti.select(h + 1 == base + length, base, h + 1)
+        return h
 
     @ti.func
     def block_populations(self, g: ti.i32, b: ti.i32, quota: ti.i32) -> ti.i32:
         """Group g's distinct Seqs (its PPs) in ``pp_by_seq`` and ``pp_by_size`` from position off[g] on, each
         PP's rank and Eq. 37 quota in its hash entry; returns the group's number of PPs."""
-        off, base, length = self.off[g], 2 * self.off[g], ti.max(2 * self.cap[g], 1)
+        off = self.off[g]
+        m, h, run_seq, run = 0, -1, 0, 0  # the current run of equal Seqs: its entry, Seq and length
         epoch = self.number_epoch[0]
-        m, h = 0, -1
         for i in range(off, off + self.n[g]):
             seq = self.seq[b, i]
-            if h < 0 or self.entry_seq[h] != seq:  # resampled siblings sit side by side: most share the last entry
-                h = base + ti.cast((ti.cast(seq, ti.u32) * ti.u32(HASH_MULTIPLIER)) % ti.cast(length, ti.u32),
-                                   ti.i32)
-                while self.entry_epoch[h] == epoch and self.entry_seq[h] != seq:  # linear probing
-                    h = ti.select(h + 1 == base + length, base, h + 1)
+            if h < 0 or seq != run_seq:  # resampled siblings sit side by side: runs of one Seq are common
+                if h >= 0:
+                    self.entry_count[h] += run
+                h = self.seq_entry(g, seq)
                 if self.entry_epoch[h] != epoch:
                     self.entry_epoch[h], self.entry_seq[h], self.entry_count[h] = epoch, seq, 0
                     self.pp_by_seq[off + m] = h
                     self.pp_by_size[off + m] = h
                     m += 1
-            self.entry_count[h] += 1
-            self.slot_entry[i] = h
+                run_seq, run = seq, 0
+            run += 1
+        if h >= 0:
+            self.entry_count[h] += run
         self.heap_sort(self.pp_by_seq, off, m, False)
         self.heap_sort(self.pp_by_size, off, m, True)
         before = 0

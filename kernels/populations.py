@@ -96,7 +96,15 @@ class PopulationKernels:
         ti.loop_config(serialize=True)
         for k in range(phase.shape[0]):
             self.start_spread(k, phase[k])
-        self.for_states(self.remove_spread, b, ti.static(()))
+        ti.loop_config(serialize=self.serial)
+        for g in range(self.n.shape[0]):  # as for_states, each particle's PP found by its Seq, run by run
+            s0, off, first = self.state_start[g], self.off[g], self.group_first_pp[g]
+            h, run_seq = -1, 0
+            for i in range(off, off + self.n[g]):
+                seq = self.seq[b, i]
+                if h < 0 or seq != run_seq:
+                    h, run_seq = self.seq_entry(g, seq), seq
+                self.remove_from(first + self.entry_rank[h], s0 + i - off, i, b, ti.static(()))
 
     @ti.func
     def start_spread(self, k: ti.i32, phase: ti.f64):
@@ -107,14 +115,13 @@ class PopulationKernels:
 
     @ti.func
     def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
-        """``eliminate`` for particle s (slot i); ``arrays``: (pp,) or (pp, keep), or () for the PPs the step
-        numbered."""
+        """``eliminate`` for particle s (slot i) of PP arrays[0][s]; ``arrays``: (pp,) or (pp, keep)."""
+        self.remove_from(arrays[0][s], s, i, b, arrays)
+
+    @ti.func
+    def remove_from(self, k: ti.i32, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
+        """``eliminate`` for particle s (slot i) of PP k; with ``arrays`` (pp, keep), its keep flag into keep[s]."""
         sums = ti.static(self.pp_sums)
-        k = 0
-        if ti.static(len(arrays)):
-            k = arrays[0][s]
-        else:
-            k = self.population_of(i)
         self.state_pp[s] = k
         a = self.pp_acc[k] + self.pp_take[k]
         gone = a >= self.pp_size[k]
