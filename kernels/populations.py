@@ -99,12 +99,21 @@ class PopulationKernels:
         ti.loop_config(serialize=self.serial)
         for g in range(self.n.shape[0]):  # as for_states, each particle's PP found by its Seq, run by run
             s0, off, first = self.state_start[g], self.off[g], self.group_first_pp[g]
-            h, run_seq = -1, 0
+            h, run_seq, k = -1, 0, -1
+            acc, sums = 0, ti.Vector([0.0] * N_PP_SUMS, ti.f64)  # PP k's remainder and sums, in registers
             for i in range(off, off + self.n[g]):
                 seq = self.seq[b, i]
                 if h < 0 or seq != run_seq:
+                    if k >= 0:
+                        self.store_spread(k, acc, sums)
                     h, run_seq = self.seq_entry(g, seq), seq
-                self.remove_from(first + self.entry_rank[h], s0 + i - off, i, b, ti.static(()))
+                    k = first + self.entry_rank[h]
+                    acc, sums = self.pp_acc[k], self.loaded_sums(k)
+                s = s0 + i - off
+                self.state_pp[s] = k
+                self.state_keep[s] = self.spread_particle(k, i, b, acc, sums)
+            if k >= 0:
+                self.store_spread(k, acc, sums)
 
     @ti.func
     def start_spread(self, k: ti.i32, phase: ti.f64):
@@ -115,28 +124,44 @@ class PopulationKernels:
 
     @ti.func
     def remove_spread(self, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
-        """``eliminate`` for particle s (slot i) of PP arrays[0][s]; ``arrays``: (pp,) or (pp, keep)."""
-        self.remove_from(arrays[0][s], s, i, b, arrays)
-
-    @ti.func
-    def remove_from(self, k: ti.i32, s: ti.i32, i: ti.i32, b: ti.i32, arrays: ti.template()):
-        """``eliminate`` for particle s (slot i) of PP k; with ``arrays`` (pp, keep), its keep flag into keep[s]."""
-        sums = ti.static(self.pp_sums)
+        """``eliminate`` for particle s (slot i) of PP k = arrays[0][s]; ``arrays``: (pp,) or (pp, keep), whose
+        keep[s] takes the keep flag."""
+        k = arrays[0][s]
+        acc, sums = self.pp_acc[k], self.loaded_sums(k)
+        kept = self.spread_particle(k, i, b, acc, sums)
+        self.store_spread(k, acc, sums)
         self.state_pp[s] = k
-        a = self.pp_acc[k] + self.pp_take[k]
-        gone = a >= self.pp_size[k]
-        self.pp_acc[k] = a - ti.select(gone, self.pp_size[k], 0)
-        kept = ti.cast(not gone, ti.i8)
         if ti.static(len(arrays) > 1):
             arrays[1][s] = kept
         self.state_keep[s] = kept
+
+    @ti.func
+    def spread_particle(self, k: ti.i32, i: ti.i32, b: ti.i32, acc: ti.template(), sums: ti.template()) -> ti.i8:
+        """Eq. 37 for the next particle (slot i) of PP k, whose running remainder ``acc`` and Eq. 38 sums ``sums``
+        (both updated in place) the caller holds: the keep flag (1: survives)."""
+        a = acc + self.pp_take[k]
+        gone = a >= self.pp_size[k]
+        acc = a - ti.select(gone, self.pp_size[k], 0)
         if not gone:
-            sums[k, P_KEPT] += 1.0
-            sums[k, P_TP] += ti.cast(self.tp[b, i], ti.f64)
+            sums[P_KEPT] += 1.0
+            sums[P_TP] += ti.cast(self.tp[b, i], ti.f64)
             if self.e[b, i] == 1:
-                sums[k, P_KEPT_E] += 1.0
-                sums[k, P_X] += ti.cast(self.x[b, i], ti.f64)
-                sums[k, P_Y] += ti.cast(self.y[b, i], ti.f64)
+                sums[P_KEPT_E] += 1.0
+                sums[P_X] += ti.cast(self.x[b, i], ti.f64)
+                sums[P_Y] += ti.cast(self.y[b, i], ti.f64)
+        return ti.cast(not gone, ti.i8)
+
+    @ti.func
+    def loaded_sums(self, k: ti.i32):
+        """PP k's Eq. 38 sums as a vector."""
+        return ti.Vector([self.pp_sums[k, c] for c in ti.static(range(N_PP_SUMS))], ti.f64)
+
+    @ti.func
+    def store_spread(self, k: ti.i32, acc: ti.i32, sums: ti.template()):
+        """PP k's running remainder and sums back into ``pp_acc`` and ``pp_sums``."""
+        self.pp_acc[k] = acc
+        for c in ti.static(range(N_PP_SUMS)):
+            self.pp_sums[k, c] = sums[c]
 
     @ti.func
     def index_pixel(self, b: ti.i32, s: ti.i32, i: ti.i32):
