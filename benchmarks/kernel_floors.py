@@ -190,7 +190,8 @@ def table(result: dict) -> list[str]:
             continue
         lines.append(f"| searching{' + tracking' if k == 'step_pair' else ''} | `{k}` ("
                      + ", ".join(f"{n[str(s)][0]:,} slots, {n[str(s)][1]:,.0f} with E = 1" for s in PRESETS)
-                     + "; then numbers the PPs, Eq. 37) | " + " | ".join(f"{v:.2f}" for v in ms) + " | " + ", ".join(f"{v:.2f}" for v in floor)
+                     + "; then numbers the PPs, Eq. 37) | " + " | ".join(f"{v:.2f}" for v in ms) + " | "
+                     + ", ".join(f"{v:.2f}" for v in floor)
                      + " | " + ", ".join(f"{a / b:.1f}×" for a, b in zip(ms, floor)) + " |")
     rest = sorted({k for s in PRESETS for k in m[str(s)]["kernels"]} - set(STEP_KERNELS),
                   key=lambda k: -m[str(PRESETS[-1])]["kernels"].get(k, 0.0))

@@ -28,6 +28,9 @@ from .population_numbers import NumberingKernels
 P_KEPT, P_KEPT_E, P_TP, P_X, P_Y = range(5)
 N_PP_SUMS = 5
 RULE_TRACKED = 5  # eliminate_and_hand_over's ``rule``: T_PTp, T_PE, r², most, T, then the T tracked (x, y)
+I32_1D, I32_2D = ti.types.ndarray(dtype=ti.i32, ndim=1), ti.types.ndarray(dtype=ti.i32, ndim=2)
+F64_1D, F64_2D = ti.types.ndarray(dtype=ti.f64, ndim=1), ti.types.ndarray(dtype=ti.f64, ndim=2)
+F32_2D = ti.types.ndarray(dtype=ti.f32, ndim=2)
 
 
 PIXEL_CLASS_FLOOR = 1 << 19  # entries: every frame up to 724 × 724 px (640 × 512 too) shares the tables' class
@@ -222,14 +225,8 @@ class PopulationKernels:
             counts[g] = self.n[g]
 
     @ti.kernel
-    def eliminate_and_hand_over(self, b: ti.i32, pp: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                                table: ti.types.ndarray(dtype=ti.f64, ndim=2),
-                                rule: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                                index: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                                counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                                outcome: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                                floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                                ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+    def eliminate_and_hand_over(self, b: ti.i32, pp: I32_1D, table: F64_2D, rule: F64_1D, index: I32_2D,
+                                counts: I32_1D, outcome: I32_2D, floats: F32_2D, ints: I32_2D):
         """:meth:`eliminate`, the potential-target decisions (:meth:`potential_targets`) and :meth:`hand_over`
         with members in one launch.  ``rule``: T_PTp, T_PE, the squared duplicate radius in px², the most PPs
         to hand over, the number T of active tracks, then their positions x₀, y₀, …, x_T−1, y_T−1 in px
@@ -242,13 +239,8 @@ class PopulationKernels:
                                  ti.static((self.pp_rank, self.pp_cursor, floats, ints)), True)
 
     @ti.kernel
-    def eliminate_and_hand_over_numbered(self, b: ti.i32, phase: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                                         rule: ti.types.ndarray(dtype=ti.f64, ndim=1),
-                                         index: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                                         counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                                         outcome: ti.types.ndarray(dtype=ti.i32, ndim=2),
-                                         floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                                         ints: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+    def eliminate_and_hand_over_numbered(self, b: ti.i32, phase: F64_1D, rule: F64_1D, index: I32_2D,
+                                         counts: I32_1D, outcome: I32_2D, floats: F32_2D, ints: I32_2D):
         """:meth:`eliminate_and_hand_over` for the PPs the step numbered on the device (each PP k's ``phase[k]``;
         ``NumberingKernels.number_populations``), so no per-particle array comes from the host."""
         self.eliminate_numbered(b, phase)

@@ -209,21 +209,12 @@ class ParticlePool:
         """Per-pixel birth proposals: {group: (pixel indices y·W + x, weights ≥ 0)}; cumulative weights in f64.
         A particle drawn from a pixel takes that pixel's PP label in ``labels`` (H, W) as its Seq (Eq. 36; 0
         without labels)."""
-        pixels, cdf = [], []
-        off = np.zeros(self.n_groups, np.int32)
-        count = np.zeros(self.n_groups, np.int32)
-        total = np.zeros(self.n_groups)
-        pos = 0
-        for g in range(self.n_groups):
-            pix, wts = per_group.get(g, (np.zeros(0, np.int64), np.zeros(0)))
-            pix, wts = np.asarray(pix, np.int32), np.asarray(wts, np.float64)
-            off[g], count[g] = pos, len(pix)
-            if len(pix):
-                c = np.cumsum(wts)
-                pixels.append(pix)
-                cdf.append(c)
-                total[g] = c[-1]
-            pos += len(pix)
+        maps = [(np.asarray(pix, np.int32), np.cumsum(np.asarray(wts, np.float64))) for pix, wts in
+                (per_group.get(g, (np.zeros(0), np.zeros(0))) for g in range(self.n_groups))]
+        count = np.array([len(pix) for pix, _ in maps], np.int32)
+        off, pos = (np.cumsum(count) - count).astype(np.int32), int(count.sum())
+        total = np.array([c[-1] if len(c) else 0.0 for _, c in maps])
+        pixels, cdf = [pix for pix, _ in maps if len(pix)], [c for _, c in maps if len(c)]
         if pos > self.map_capacity:
             raise ParameterError(f"proposal maps hold {pos} pixels, more than the pool's map capacity {self.map_capacity}")
         if labels is not None and np.shape(labels) != self.frame_shape:
@@ -233,6 +224,16 @@ class ParticlePool:
         seq = np.zeros(len(full_pix), np.int32) if labels is None or not pixels else \
             np.asarray(labels).reshape(-1)[full_pix].astype(np.int32)
         self.k.load_map(off, count, total, full_pix.astype(np.int32), seq, full_cdf)
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Live particles per group.  Every launch that changes the particles sets it anew, and each new value
+        counts one more in ``changes`` (what a subclass's results computed on the device are valid for)."""
+        return self._counts
+
+    @counts.setter
+    def counts(self, value: np.ndarray) -> None:
+        self._counts, self.changes = value, getattr(self, "changes", -1) + 1
 
     def set_counts(self, counts) -> None:
         """Set the live particle count of every group (checked against its capacity)."""

@@ -7,11 +7,22 @@ import numpy as np
 import pytest
 
 from tbd_taichi.errors import ParameterError
-from tbd_taichi.methods.sgds.populations import eliminated_per_population, slab_populations
+from tbd_taichi.numpy_kernels.populations import eliminated_per_population, slab_populations
 from tbd_taichi.methods.sgds.searching_pool import SearchingPool
 from tbd_taichi.particles import ParticlePool
 
 from test_populations import pool_engine
+
+
+def engine_layout(engine: str, monkeypatch) -> str:
+    """``pool_engine``, and "taichi-flat": the GPUs' layout (one thread per slot, the unfused step, parallel
+    loops over groups) on the CPU."""
+    if engine == "taichi-flat":
+        import tbd_taichi.particles as particles
+
+        monkeypatch.setattr(particles, "one_thread_per_slot", lambda arch: True)
+        return "taichi"
+    return pool_engine(engine, monkeypatch)
 
 SHAPE = (23, 31)
 CAPS = [1500, 40, 1300, 7, 900]
@@ -92,11 +103,11 @@ def assert_same(a, b, rtol: float = 0.0):
 
 
 @pytest.mark.parametrize("kind", ["few", "distinct", "wide", "one"])
-@pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "numpy"])
+@pytest.mark.parametrize("engine", ["taichi", "taichi-parallel", "taichi-flat", "numpy"])
 def test_numbered_on_the_device_as_on_the_host(engine, kind, monkeypatch):
     """Numbered in the step, then eliminated and handed over: the same populations, quotas, hand-overs, index image
     and surviving particles as the host's numbering of the Seq the step read."""
-    engine = pool_engine(engine, monkeypatch)
+    engine = engine_layout(engine, monkeypatch)
     numbered = run(engine, kind, numbered=True, paired=False)
     assert_same(numbered, run(engine, kind, numbered=False, paired=False))
     n_pp = [n for n, *_ in numbered]
@@ -116,21 +127,74 @@ def test_numbered_in_the_paired_step(kind):
     assert_same(paired, run("numpy", kind, numbered=True, paired=True), rtol=1e-6)
 
 
-def test_numbered_needs_its_step():
-    search, _ = pools("taichi", "few")
-    z = np.zeros(SHAPE, np.float32)
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_numbered_needs_its_step(engine):
+    search, _ = pools(engine, "few")
+    z, index = np.zeros(SHAPE, np.float32), np.zeros(SHAPE, np.int32)
+    rule = (0.0, 0.3, [], 2.0, 1)
     with pytest.raises(ParameterError, match="quota just before"):
-        search.eliminate_and_hand_over_numbered([], np.zeros(SHAPE, np.int32), 0.0, 0.3, [], 2.0, 1)
-    n_pp = search.step(0, z, quota=QUOTA)
-    with pytest.raises(ParameterError, match="one phase"):
-        search.eliminate_and_hand_over_numbered(np.zeros(n_pp + 1), np.zeros(SHAPE, np.int32), 0.0, 0.3, [], 2.0, 1)
-    search.eliminate_and_hand_over_numbered(np.zeros(n_pp), np.zeros(SHAPE, np.int32), 0.0, 0.3, [], 2.0, 1)
+        search.eliminate_and_hand_over_numbered([], index, *rule)
+    n_pp = search.step(0, z, None, False, None, None, QUOTA)  # the quota by position too
+    with pytest.raises(ParameterError, match="one phase per population"):
+        search.eliminate_and_hand_over_numbered(np.zeros(n_pp + 1), index, *rule)
+    with pytest.raises(ParameterError, match=r"\[0, 1\)"):
+        search.eliminate_and_hand_over_numbered(np.full(n_pp, 1.0), index, *rule)
+    with pytest.raises(ParameterError, match="index image"):  # a refused call leaves the numbers usable
+        search.eliminate_and_hand_over_numbered(np.zeros(n_pp), np.zeros((2, 2), np.int32), *rule)
+    search.eliminate_and_hand_over_numbered(np.zeros(n_pp), index, *rule)
     with pytest.raises(ParameterError, match="quota just before"):  # the numbers are used up
-        search.eliminate_and_hand_over_numbered(np.zeros(n_pp), np.zeros(SHAPE, np.int32), 0.0, 0.3, [], 2.0, 1)
+        search.eliminate_and_hand_over_numbered(np.zeros(n_pp), index, *rule)
+    n_pp = search.step(1, z, quota=QUOTA)
+    search.step(2, z)  # a step without a quota: the numbers no longer hold
+    with pytest.raises(ParameterError, match="quota just before"):
+        search.eliminate_and_hand_over_numbered(np.zeros(n_pp), index, *rule)
     with pytest.raises(ParameterError, match="either"):
         search.step(1, z, quota=QUOTA, seq_out=np.empty(search.capacity, np.int32))
-    with pytest.raises(ParameterError, match="quota must be"):
-        search.step(1, z, quota=-1)
-    plain = ParticlePool([50], SHAPE, engine="taichi")
+    for bad in (-1, 2 ** 31, 2.5):
+        with pytest.raises(ParameterError, match="quota must be"):
+            search.step(1, z, quota=bad)
+    plain = ParticlePool([50], SHAPE, engine=engine)
     with pytest.raises(ParameterError, match="do not number"):
         plain.step(0, z, quota=QUOTA)
+
+
+CHANGES = {  # every way the pool's particles change between a numbered step and the elimination
+    "set_state": lambda pool: pool.set_state({0: dict(x=np.full(60, 3.0), y=np.full(60, 4.0), vx=np.zeros(60),
+                                                      vy=np.zeros(60), inten=np.full(60, 5.0),
+                                                      e=np.ones(60, np.int32), tp=np.ones(60, np.int32),
+                                                      seq=np.arange(60, dtype=np.int32) + 900)}),
+    "set_counts": lambda pool: pool.set_counts(pool.counts // 2),
+    "keep": lambda pool: pool.keep(np.arange(int(pool.counts.sum())) % 2 == 0),
+    "predict": lambda pool: pool.predict(9, top_up=pool.counts),
+    "resample": lambda pool: pool.resample(9),
+    "eliminate": lambda pool: pool.eliminate(*host_numbers(pool)),
+}
+
+
+def host_numbers(pool):
+    """(pp, size, take, phase) of the pool's populations, numbered on the host."""
+    pp_block, inverse, counts = slab_populations(pool.counts, pool.seq_in_state_order())
+    return inverse, counts, eliminated_per_population(pp_block, counts, QUOTA), np.zeros(len(counts))
+
+
+@pytest.mark.parametrize("change", sorted(CHANGES))
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_numbers_go_stale_when_the_pool_changes(engine, change):
+    """After any change of the pool the device's numbers no longer describe its particles: the numbered
+    elimination refuses to run, on both engines, instead of handing over with stale sizes or populations."""
+    search, _ = pools(engine, "few")
+    n_pp = search.step(0, np.zeros(SHAPE, np.float32), quota=QUOTA)
+    assert n_pp > 4
+    CHANGES[change](search)
+    with pytest.raises(ParameterError, match="no change of the pool"):
+        search.eliminate_and_hand_over_numbered(np.zeros(n_pp), np.zeros(SHAPE, np.int32), 0.0, 0.3, [], 2.0, 1)
+
+
+@pytest.mark.parametrize("engine", ["taichi", "numpy"])
+def test_a_zero_quota_eliminates_nothing(engine):
+    search, _ = pools(engine, "few")
+    n_pp = search.step(0, np.zeros(SHAPE, np.float32), quota=0)
+    live = int(search.counts.sum())
+    _, sizes = search.eliminate_and_hand_over_numbered(np.full(n_pp, 0.5), np.zeros(SHAPE, np.int32), 1e9, 1.0, [],
+                                                        2.0, 0)  # no potential target: nothing handed over
+    assert sizes == [] and int(search.counts.sum()) == live

@@ -6,8 +6,8 @@ import pytest
 from tbd_taichi.errors import ParameterError
 from tbd_taichi.kernels.loops import block_class, frame_class
 from tbd_taichi.kernels.populations import P_KEPT, P_KEPT_E, P_TP, P_X, P_Y, pixel_class
-from tbd_taichi.numpy_kernels.populations import spread_removal
-from tbd_taichi.methods.sgds.populations import eliminated_per_population, populations, slab_populations
+from tbd_taichi.numpy_kernels.populations import (eliminated_per_population, populations, slab_populations,
+                                                  spread_removal)
 from tbd_taichi.methods.sgds.searching_pool import SearchingPool
 
 SHAPE = (19, 27)

@@ -44,8 +44,9 @@ class StepMixin:
         tens of µs on the CPU backend), with the pool's constants (``step_values``): live counts after the
         top-up ``counts``, resampled counts ``n_out``.  ``options`` (:class:`StepOptions`): ``systematic``
         resampling; ``read_seq``, also the resampled particles' Seq in state order into ``seq``
-        (:meth:`read_seq`, which the searching PFs need next); ``fused``, as :meth:`fused_step` (CPU, tile
-        loops split, no kind 2 group)."""
+        (:meth:`read_seq`); ``number``, the resampled particles' populations numbered instead (SGDS-PF's
+        searching PFs: :meth:`read_out`); ``fused``, as :meth:`fused_step` (CPU, tile loops split, no kind 2
+        group)."""
         values = self.step_values(frame, b)
         if ti.static(options.fused):
             self.fused_step(values, counts, z, n_out, options.systematic)

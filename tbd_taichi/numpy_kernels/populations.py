@@ -1,4 +1,6 @@
-"""NumPy twin of ``tbd_taichi.kernels.populations`` (Eqs. 36–38 on the particle pool), vectorised.
+"""NumPy twin of ``tbd_taichi.kernels.populations`` and ``kernels.population_numbers`` (Eqs. 36–38 on the
+particle pool), vectorised; ``populations``, ``slab_populations`` and ``eliminated_per_population`` number the PPs
+and set Eq. 37's quotas (the twin of the device's numbering, and the host reference the tests compare it with).
 
 The per-PP sums are ``np.bincount`` sums, which add in state order as the kernel does, so both
 give the same bits.  A mixin of ``NumpyParticleKernels``.
@@ -55,6 +57,15 @@ def potential_targets(sums: np.ndarray, rule: np.ndarray):
     rank = np.full(len(n), -1, np.int32)
     rank[handed] = np.arange(len(handed), dtype=np.int32)
     return (potential & near) | (rank >= 0), rank
+
+
+def populations(group: np.ndarray, seq: np.ndarray, table_limit: int = 1 << 22):
+    """Particle populations as (block, Seq) pairs, ordered by block then Seq.
+
+    ``group``: each particle's block, non-decreasing (state order); ``seq``: its Seq.
+    Returns (block of each PP, PP index of each particle, particles per PP); see :func:`slab_populations`."""
+    group = np.asarray(group, np.int64)
+    return slab_populations(np.bincount(group) if len(group) else np.zeros(0, np.int64), seq, table_limit)
 
 
 def slab_populations(slab_counts, seq: np.ndarray, table_limit: int = 1 << 22):
@@ -149,11 +160,11 @@ class NumpyPopulationKernels:
     def number_populations(self, b, io) -> None:
         """Twin of ``NumberingKernels.number_populations``: ``io[0]``, Eq. 37's quota in, the number of PPs out."""
         pp_block, pp, size = slab_populations(self.n, self.seq[b, self.live_slots()])
-        self._numbered = (pp.astype(np.int32), size, eliminated_per_population(pp_block, size, int(io[0])))
+        self._numbers = (pp.astype(np.int32), size, eliminated_per_population(pp_block, size, int(io[0])))
         io[0] = len(size)
 
     def eliminate_and_hand_over_numbered(self, b, phase, rule, index, counts, outcome, floats, ints) -> None:
-        pp, size, take = self._numbered
+        pp, size, take = self._numbers
         self.eliminate_and_hand_over(b, pp, np.array([size, take, phase], np.float64), rule, index, counts, outcome,
                                      floats, ints)
 

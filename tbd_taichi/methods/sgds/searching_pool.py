@@ -24,30 +24,33 @@ class SearchingPool(ParticlePool):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._eliminated = None  # (particles, populations) of the last eliminate, until its hand_over
-        self._numbered = None  # populations numbered by the last step (its ``quota``), until they are eliminated
+        self._numbered = None  # (populations, changes) of the last step with a quota (``ParticlePool.changes``)
 
-    def step(self, *args, **kwargs):
-        """:meth:`ParticlePool.step`; with ``quota``, its populations' number is kept for
-        :meth:`eliminate_and_hand_over_numbered`."""
-        read = super().step(*args, **kwargs)
-        self._numbered = read if kwargs.get("quota") is not None else None
+    def step(self, frame: int, z: np.ndarray, n_out=None, systematic: bool = False, top_up=None,
+             seq_out: np.ndarray | None = None, quota: int | None = None):
+        """:meth:`ParticlePool.step`; with ``quota``, the populations it numbers serve
+        :meth:`eliminate_and_hand_over_numbered` until the pool changes."""
+        read = super().step(frame, z, n_out, systematic, top_up, seq_out, quota)
+        self._numbered = None if quota is None else (read, self.changes)
         return read
 
-    def step_with(self, *args, **kwargs):
-        """:meth:`ParticlePool.step_with`, keeping the populations' number as :meth:`step` does."""
-        read, estimates = super().step_with(*args, **kwargs)
-        self._numbered = read if kwargs.get("quota") is not None else None
+    def step_with(self, other: ParticlePool, frame: int, z: np.ndarray, top_up=None,
+                  seq_out: np.ndarray | None = None, quota: int | None = None) -> tuple:
+        """:meth:`ParticlePool.step_with`, keeping the numbered populations as :meth:`step` does."""
+        read, estimates = super().step_with(other, frame, z, top_up, seq_out, quota)
+        self._numbered = None if quota is None else (read, self.changes)
         return read, estimates
 
     def _read_out_buffer(self, seq_out, quota, n_out: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """:meth:`ParticlePool._read_out_buffer`; with ``quota``, a one-element array holding it, the step's
-        ``seq`` argument that returns the number of populations."""
+        """:meth:`ParticlePool._read_out_buffer`; with ``quota`` (Eq. 37's particles a group, a whole number in
+        [0, 2³¹)), a one-element array holding it, the step's ``seq`` argument that returns the number of
+        populations."""
         if quota is None:
             return super()._read_out_buffer(seq_out, quota, n_out)
         if seq_out is not None:
             raise ParameterError("a step reads either the particles' Seq or their populations' number, not both")
-        if int(quota) < 0:
-            raise ParameterError(f"quota must be ≥ 0 particles, got {quota}")
+        if not isinstance(quota, (int, np.integer)) or not 0 <= int(quota) < 2 ** 31:
+            raise ParameterError(f"quota must be a whole number of particles in [0, 2³¹), got {quota!r}")
         return np.array([int(quota)], np.int32), None
 
     @staticmethod
@@ -118,13 +121,16 @@ class SearchingPool(ParticlePool):
         """:meth:`eliminate_and_hand_over` of the populations that the step just before numbered on the device
         (``step(…, quota=…)``: their particles, sizes and Eq. 37 quotas never come to the host), PP k spread by
         ``phase[k]`` ∈ [0, 1), one per population."""
-        if self._numbered is None:
-            raise ParameterError("eliminate_and_hand_over_numbered needs a step with a quota just before")
-        n_pp = self._numbered
+        if self._numbered is None or self._numbered[1] != self.changes:
+            raise ParameterError("eliminate_and_hand_over_numbered needs a step with a quota just before, "
+                                 "with no change of the pool between them")
+        n_pp = self._numbered[0]
         phase = np.ascontiguousarray(phase, dtype=np.float64).reshape(-1)
-        if phase.shape != (n_pp,) or ((phase < 0) | (phase >= 1)).any():
-            raise ParameterError(f"need one phase in [0, 1) per population ({n_pp}), got {phase.shape[0]}")
-        self._numbered = None
+        if phase.shape != (n_pp,):
+            raise ParameterError(f"need one phase per population ({n_pp}), got {phase.shape[0]}")
+        if ((phase < 0) | (phase >= 1)).any():
+            raise ParameterError("every phase must lie in [0, 1)")
+        self._check_index_image(index)
         return self._decide_and_hand_over(lambda *out: self.k.eliminate_and_hand_over_numbered(self.buf, phase, *out),
                                           n_pp, int(self.counts.sum()), index, (t_ptp, t_pe, tracked, radius, most))
 
@@ -132,7 +138,7 @@ class SearchingPool(ParticlePool):
         """The launch of an ``eliminate_and_hand_over`` kernel, ``launch(rule, index, counts, outcome, floats,
         ints)``, over n particles in ``n_pp`` populations; ``rule``: (T_PTp, T_PE, tracked, radius, most)."""
         self._check_index_image(index)
-        self._eliminated = None
+        self._eliminated = self._numbered = None  # the launch rewrites the populations' tables
         t_ptp, t_pe, tracked, radius, most = rule
         tracked = np.asarray(tracked, np.float64).reshape(-1, 2)
         rule = np.concatenate([[t_ptp, t_pe, radius * radius, max(int(most), 0), len(tracked)], tracked.ravel()])
