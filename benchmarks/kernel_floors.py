@@ -227,8 +227,9 @@ def main() -> None:
     (out / "kernel_floors.json").write_text(json.dumps(result, indent=1))
     lines = ["# SGDS-PF: where the frame time goes, against the work alone", "",
              f"`python benchmarks/kernel_floors.py --frames {args.frames}` on {result['machine']}. Measured: "
-             "`bench --paired --runs 2` per kernel (ms in the frames each ran; `step` and `step_pair` alternate: "
-             "`step_pair` runs in the frames with a live track). Work alone: the kernel's irreducible work, each "
+             "`bench --paired --runs 2` per kernel (ms in the frames each ran; on the CPU `step_pair` steps the "
+             "searching and tracking PFs in every frame, also with no live track). Work alone: the kernel's "
+             "irreducible work, each "
              "piece alone in a tight parallel loop over an in-cache set (see the script's docstring).", ""]
     lines += table(result)
     (out / "kernel_floors.md").write_text("\n".join(lines) + "\n")
