@@ -9,8 +9,8 @@ for every block at once, one task per block:
    entries stamped with the call's epoch, so nothing is cleared), which counts the particles of each distinct Seq;
 2. the block's distinct Seqs are heap-sorted by Seq (their rank is the PP's number within the block), then by
    (size, Seq) for Eq. 37's quotas;
-3. a serial pass numbers the blocks' PPs one after the other and fills the per-PP size and quota tables that
-   ``PopulationKernels.eliminate_numbered`` reads.
+3. a serial pass gives each block the number of its first PP, and a pass per block fills the per-PP size and
+   quota tables that ``PopulationKernels.eliminate_numbered`` reads.
 
 Every task is serial within its block, so the numbers do not depend on the thread count.  The host then needs only
 the number of PPs (for their random phases), not each particle's Seq.  The NumPy twin is
