@@ -130,7 +130,6 @@ class SearchingPool(ParticlePool):
             raise ParameterError(f"need one phase per population ({n_pp}), got {phase.shape[0]}")
         if ((phase < 0) | (phase >= 1)).any():
             raise ParameterError("every phase must lie in [0, 1)")
-        self._check_index_image(index)
         return self._decide_and_hand_over(lambda *out: self.k.eliminate_and_hand_over_numbered(self.buf, phase, *out),
                                           n_pp, int(self.counts.sum()), index, (t_ptp, t_pe, tracked, radius, most))
 
