@@ -20,7 +20,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .loops import light_ir
+from .loops import FrameSize, light_ir
 from .rng import NormalTables, key_prefix, normals_at
 
 FEATURES = 3  # grey, edge, Gabor
@@ -54,17 +54,19 @@ def histogram_work(n: int, half_x: float, half_y: float) -> int:
 
 
 @ti.data_oriented
-class FeatureFusionKernels:
-    """Fields for ``n`` particles, frames of ``shape``, ``bins`` histogram bins and the Gabor taps' half widths."""
+class FeatureFusionKernels(FrameSize):
+    """Fields for ``n`` particles, frames of ``shape``, ``bins`` histogram bins and the Gabor taps' half widths.
+    The per-pixel fields take the extents of the frame's size class (``loops.frame_class``) and the kernels read
+    the frame's (H, W) from ``frame_hw``, so frames of one class share the compiled kernels."""
 
     def __init__(self, n: int, shape, bins: int, gabor_halves):
-        self.n, self.shape, self.bins = int(n), (int(shape[0]), int(shape[1])), int(bins)
+        self.n, self.bins = int(n), int(bins)
         self.gx, self.gy = (int(v) for v in gabor_halves)
-        h, w = self.shape
+        rows, columns = self.frame_size_field(shape)
         self.margin = m = max(self.gx, self.gy, 1)  # zero border: every tap reads without a bounds test
-        self.image = ti.field(ti.f32, (h + 2 * m, w + 2 * m))  # the frame at [m, m + h) × [m, m + w)
-        self.rowpass = ti.field(ti.f32, (h + 2 * m, w))  # the row pass at rows [m, m + h)
-        self.binmap = ti.field(ti.i32, (FEATURES, h, w))
+        self.image = ti.field(ti.f32, (rows + 2 * m, columns + 2 * m))  # the frame at [m, m + H) × [m, m + W)
+        self.rowpass = ti.field(ti.f32, (rows + 2 * m, columns))  # the row pass, the frame at rows [m, m + H)
+        self.binmap = ti.field(ti.i32, (FEATURES, rows, columns))
         self.ranges = ti.field(ti.f32, (FEATURES, 2))  # lo, hi of each feature's bins
         self.row_taps, self.col_taps = ti.field(ti.f32, 2 * self.gx + 1), ti.field(ti.f32, 2 * self.gy + 1)
         self.state = ti.field(ti.f32, (self.n, 4))  # x, y, ẋ, ẏ (px, px/frame)
@@ -83,32 +85,46 @@ class FeatureFusionKernels:
     def feature_maps(self, frame: ti.types.ndarray(dtype=ti.f32, ndim=2), raw: ti.types.ndarray(dtype=ti.f32, ndim=3),
                      write_raw: ti.i32):
         """binmap[f] = each pixel's bin of grey (the frame), edge magnitude G and Gabor response W; with
-        ``write_raw``, ``raw`` (3, H, W) gets the unquantised values (frame 0 sets the ranges from them)."""
-        h, w, m = ti.static(self.shape[0], self.shape[1], self.margin)
-        for r, c in ti.ndrange(h, w):
-            self.image[r + m, c + m] = frame[r, c]
-        for r, c in ti.ndrange(h, w):
-            acc = ti.f32(0.0)
-            for k in ti.static(range(-self.gx, self.gx + 1)):
-                acc += self.row_taps[k + self.gx] * self.image[r + m, c + m + k]
-            self.rowpass[r + m, c] = acc
-        for r, c in ti.ndrange(h, w):
-            gabor = ti.f32(0.0)
-            for k in ti.static(range(-self.gy, self.gy + 1)):
-                gabor += self.col_taps[k + self.gy] * self.rowpass[r + m + k, c]
-            g2 = ti.f32(0.0)
-            for s in ti.static(range(4)):
+        ``write_raw``, ``raw`` (3, H, W) gets the unquantised values (frame 0 sets the ranges from them).  The
+        zero border is written too: the fields may hold a larger frame of the class (``backend.reusable``)."""
+        h, w, m = self.frame_hw[0], self.frame_hw[1], ti.static(self.margin)
+        rows, columns = ti.static(self.frame_extents)  # static loops over the class, the frame's pixels inside:
+        for r, c in ti.ndrange(rows + 2 * m, columns + 2 * m):  # faster than loops to (h, w) read at run time
+            if r < h + 2 * m and c < w + 2 * m:
+                v = ti.f32(0.0)
+                if m <= r < h + m and m <= c < w + m:  # a statement: the frame is read only inside
+                    v = frame[r - m, c - m]
+                self.image[r, c] = v
+        for r, c in ti.ndrange(rows + 2 * m, columns):  # the border rows too: zeros (the image's border is)
+            if r < h + 2 * m and c < w:
                 acc = ti.f32(0.0)
-                for a in ti.static(range(3)):
-                    for b in ti.static(range(3)):
-                        if ti.static(SOBEL[s][a][b] != 0):
-                            acc += ti.static(float(SOBEL[s][a][b])) * self.image[r + m + a - 1, c + m + b - 1]
-                g2 += acc * acc
-            values = ti.Vector([self.image[r + m, c + m], ti.sqrt(g2), gabor], dt=ti.f32)
-            for f in ti.static(range(FEATURES)):
-                if write_raw != 0:
-                    raw[f, r, c] = values[f]
-                self.binmap[f, r, c] = self.bin_of(f, values[f])
+                for k in ti.static(range(-self.gx, self.gx + 1)):
+                    acc += self.row_taps[k + self.gx] * self.image[r, c + m + k]
+                self.rowpass[r, c] = acc
+        for r, c in ti.ndrange(rows, columns):
+            if r < h and c < w:
+                self.pixel_features(r, c, raw, write_raw)
+
+    @ti.func
+    def pixel_features(self, r: ti.i32, c: ti.i32, raw: ti.template(), write_raw: ti.i32):
+        """:meth:`feature_maps`' values of pixel (r, c) and their bins."""
+        m = ti.static(self.margin)
+        gabor = ti.f32(0.0)
+        for k in ti.static(range(-self.gy, self.gy + 1)):
+            gabor += self.col_taps[k + self.gy] * self.rowpass[r + m + k, c]
+        g2 = ti.f32(0.0)
+        for s in ti.static(range(4)):
+            acc = ti.f32(0.0)
+            for a in ti.static(range(3)):
+                for b in ti.static(range(3)):
+                    if ti.static(SOBEL[s][a][b] != 0):
+                        acc += ti.static(float(SOBEL[s][a][b])) * self.image[r + m + a - 1, c + m + b - 1]
+            g2 += acc * acc
+        values = ti.Vector([self.image[r + m, c + m], ti.sqrt(g2), gabor], dt=ti.f32)
+        for f in ti.static(range(FEATURES)):
+            if write_raw != 0:
+                raw[f, r, c] = values[f]
+            self.binmap[f, r, c] = self.bin_of(f, values[f])
 
     @ti.func
     def bin_of(self, f: ti.i32, v: ti.f32) -> ti.i32:
@@ -120,9 +136,11 @@ class FeatureFusionKernels:
     @ti.kernel
     def rebin(self, raw: ti.types.ndarray(dtype=ti.f32, ndim=3)):
         """binmap from the unquantised maps and the current ranges (frame 0, once the ranges are set)."""
-        h, w = ti.static(self.shape)
-        for f, r, c in ti.ndrange(FEATURES, h, w):
-            self.binmap[f, r, c] = self.bin_of(f, raw[f, r, c])
+        h, w = self.frame_hw[0], self.frame_hw[1]
+        rows, columns = ti.static(self.frame_extents)
+        for f, r, c in ti.ndrange(FEATURES, rows, columns):
+            if r < h and c < w:
+                self.binmap[f, r, c] = self.bin_of(f, raw[f, r, c])
 
     # ------------------------------------------------------------------ Eqs. 11–13, 19–22: one launch, all particles
 
@@ -139,7 +157,7 @@ class FeatureFusionKernels:
         v-weighted concatenation (Eqs. 21–22); 2, Eq. 21 as printed, the bin-wise sums F = Σ v_i f_i of the
         template and the candidate (the candidate's v on both sides) and ρ = Σ_b √(F_t F_c); then
         loglik = −(1 − ρ)/(2σ_L²)."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         for p in range(first, first + count):
             x, y = self.state[p, 0], self.state[p, 1]
             for f, b in ti.ndrange(FEATURES, self.bins):
@@ -276,7 +294,7 @@ class FeatureFusionKernels:
     def random_walk(self, seed: ti.u32, frame: ti.i32, sigma_q: ti.f32, velocity: ti.i32):
         """x ← x + ẋ·velocity + σ_q·n per axis (Eq. 1: a random walk, or constant velocity), kept in the frame;
         with ``velocity`` the displacement becomes the particle's velocity."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         kx, ky = key_prefix(seed, frame, S_X), key_prefix(seed, frame, S_Y)
         for p in range(self.n):
             nx, ny = normals_at(self.tables.w, self.tables.k, self.tables.phi, [kx, ky], p)

@@ -27,3 +27,22 @@ def kernel_module(engine: str, concept: str, arch: str | None = None) -> ModuleT
         backend.ensure_init(arch)
         return importlib.import_module(f"tbd_taichi.kernels.{concept}")
     return importlib.import_module(f"tbd_taichi.numpy_kernels.{concept}")
+
+
+def frame_kernels(owner, engine: str, concept: str, name: str, dims: tuple, shape, arch: str | None = None):
+    """``owner``'s instance of class ``name`` of ``concept``'s module for ``engine``, made with ``dims`` (the
+    frame's ``shape`` (H, W) among them).  NumPy's is made anew.  Taichi's fields take the extents of the frame's
+    size class (``kernels.loops.FrameSize``): they come from a finished owner of the same dims but for a frame of
+    the same class (``backend.reusable``: no recompilation), are set to ``shape`` and launched by the lean path."""
+    cls = getattr(kernel_module(engine, concept, arch), name)
+    if engine == "numpy":
+        return cls(*dims)
+    from . import backend
+    from .kernels.loops import frame_class
+    from .launch import Launcher
+
+    shape = (int(shape[0]), int(shape[1]))
+    key = (concept, name, frame_class(shape)) + tuple(v for v in dims if v != shape)
+    fields = backend.reusable(owner, key, lambda: cls(*dims))
+    fields.set_frame_size(shape)
+    return Launcher(fields)

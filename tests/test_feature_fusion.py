@@ -55,6 +55,21 @@ def test_feature_maps_match_the_twin_and_opencv(rng, shape):
     np.testing.assert_allclose(raw_t[2], gabor, rtol=1e-4, atol=1e-2)
 
 
+def test_feature_maps_after_a_larger_frame_of_the_class_match_fresh_fields(rng):
+    """Fields of one size class hold a larger frame first (``backend.reusable`` lends them so): the zero border
+    and the row pass's border rows are written again, so the maps of a smaller frame equal those of fields of its
+    own and the twin's, borders included."""
+    big, small = (61, 57), (17, 23)
+    (used, _), _, _ = make_pools(big)
+    maps((used,), rng.uniform(200, 255, big).astype(np.float32))  # bright: stale values would show at the borders
+    used.set_frame_size(small)
+    frame = rng.uniform(0, 255, small).astype(np.float32)
+    (fresh, twin), _, _ = make_pools(small)
+    raw_used, raw_fresh, raw_twin = maps((used, fresh, twin), frame)
+    np.testing.assert_array_equal(raw_used, raw_fresh)
+    np.testing.assert_allclose(raw_used, raw_twin, rtol=1e-4, atol=1e-3)
+
+
 def test_s135_is_the_corrected_kernel():
     """Eq. 14's S_135 bottom row (−2, 1, 0) sums to 2; read (−2, −1, 0): every kernel sums to 0, and S_135 is S_45
     mirrored left to right."""

@@ -79,7 +79,9 @@ from tbd_taichi import methods
 h, w, method = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 tbd.init("cpu")
 scene = tbd.simulate((h, w), 10, snr=8.0 if method == "tophat-pf" else 3.0, seed=1)
-tracker = methods.make_tracker(method, (h, w))
+first = scene.truth[0]
+box = {"init_box": (first["x"] - 3, first["y"] - 3, 7, 7)} if method == "feature-fusion" else {}
+tracker = methods.make_tracker(method, (h, w), **box)
 rows = [row for frame in scene.frames for row in tracker.update(frame)]
 if method == "tophat-pf":
     assert tracker.k.live_count > 0  # the particle filters ran
@@ -213,3 +215,11 @@ def test_tophat_pf_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_pa
     61 × 37 share every kernel; 40 × 330 (384 columns: another class) compiles some."""
     assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [(40, 50, "tophat-pf"), (61, 37, "tophat-pf")],
                                      (40, 330, "tophat-pf"))
+
+
+def test_feature_fusion_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path):
+    """The feature-fusion tracker's images (the zero-bordered frame, the Gabor row pass, the bin maps) take the
+    size class's extents and its kernels read (H, W) from ``frame_hw``: 40 × 50 and 61 × 37 share every kernel;
+    40 × 330 (384 columns: another class) compiles some."""
+    assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [(40, 50, "feature-fusion"), (61, 37, "feature-fusion")],
+                                     (40, 330, "feature-fusion"))

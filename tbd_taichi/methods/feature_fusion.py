@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import backend
-from ..engines import kernel_module
+from ..engines import frame_kernels
 from ..errors import ParameterError
 from ..io import stream_frame
 from ..kernels.feature_fusion import FEATURES, FUSIONS, MAX_HALF, SERIAL_WORK, gabor_taps, histogram_work
@@ -118,14 +118,7 @@ class FeatureFusionTracker(OneSequence):
                                  "feature-fusion tracker takes")
         row, col = gabor_taps(self.p.gabor_sigma, self.p.gabor_sigma, self.p.gabor_omega)
         dims = (self.n + 1, self.shape, self.p.bins, ((len(row) - 1) // 2, (len(col) - 1) // 2))
-        module = kernel_module(engine, "feature_fusion", arch)
-        if engine == "numpy":
-            self.k = module.FeatureFusionKernels(*dims)
-        else:
-            from ..launch import Launcher
-
-            self.k = Launcher(backend.reusable(self, ("feature_fusion",) + dims,
-                                               lambda: module.FeatureFusionKernels(*dims)))
+        self.k = frame_kernels(self, engine, "feature_fusion", "FeatureFusionKernels", dims, self.shape, arch)
         self.k.put("row_taps", row)
         self.k.put("col_taps", col)
         self.serial = backend.serial_loops(histogram_work(self.n, *self.half), SERIAL_WORK)

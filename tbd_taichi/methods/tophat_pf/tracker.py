@@ -9,10 +9,9 @@ import warnings
 import numpy as np
 
 from ... import backend
-from ...engines import kernel_module
+from ...engines import frame_kernels
 from ...errors import InputError, ParameterError
 from ...io import stream_frame
-from ...kernels.loops import frame_class
 from ...kernels.tophat_pf import SUM_BX, SUM_BY, SUM_S, SUM_SNR, SUM_X, SUM_Y, step_layout
 from ...tables import TRACK_COLUMNS, _dtype, make_table
 from ...tophat import find_candidates
@@ -53,8 +52,10 @@ class TophatPFTracker(OneSequence):
         self.lengths = window_lengths(self.p.windows)
         self.seed, self.engine, self.arch = int(seed), engine, arch
         groups, ring = self.p.max_candidates, self.p.s_drift + 1
-        self.k = self._kernels("tophat_pf", "TophatPFKernels", (groups, self.p.n_particles, self.shape, ring))
-        self.tophat = self._kernels("tophat", "TophatKernels", (self.shape, self.p.se_size, self.p.se_shape))
+        self.k = frame_kernels(self, engine, "tophat_pf", "TophatPFKernels",
+                               (groups, self.p.n_particles, self.shape, ring), self.shape, arch)
+        self.tophat = frame_kernels(self, engine, "tophat", "TophatKernels",
+                                    (self.shape, self.p.se_size, self.p.se_shape), self.shape, arch)
         self.k.configure(self.seed, np.array([self.p.c, self.p.sigma_v, self.p.s_drift, self.p.sigma_0], np.float32))
         self.first: list[np.ndarray] = []
         self.candidates = np.zeros((0, 3))
@@ -70,20 +71,6 @@ class TophatPFTracker(OneSequence):
         self.log: list[tuple] = []
         self.frame = 0
         self.seconds = {s: 0.0 for s in STAGES}
-
-    def _kernels(self, concept: str, name: str, dims: tuple):
-        """The engine's ``name`` kernels of ``concept`` for ``dims`` (the frame's shape among them); Taichi's reused
-        from a finished tracker of the same dims but for a frame of the same size class (the fields' extents; no
-        recompilation) and launched by the lean path."""
-        cls = getattr(kernel_module(self.engine, concept, self.arch), name)
-        if self.engine == "numpy":
-            return cls(*dims)
-        from ...launch import Launcher
-
-        key = (concept, frame_class(self.shape)) + tuple(v for v in dims if v != self.shape)
-        fields = backend.reusable(self, key, lambda: cls(*dims))
-        fields.set_frame_size(self.shape)
-        return Launcher(fields)
 
     def update(self, frame: np.ndarray) -> list[tuple]:
         """Take one raw frame; return the rows reported now."""
