@@ -26,7 +26,7 @@ count; random numbers are ``kernels.rng``'s, keyed on (seed, frame, stream, slot
 import numpy as np
 import taichi as ti
 
-from .loops import light_ir, thread_span
+from .loops import FrameSize, in_corner, light_ir, thread_span
 from .phd import ERF_END, SQRT_HALF, ErfTable, erf
 from .multiaspect_resampling import S_DRAW, STATE, SUM_ABSENT, SUM_ASPECT, SUM_VX, SUM_VY, SUM_X, SUM_Y  # noqa: F401
 from .multiaspect_resampling import MultiaspectResampling
@@ -49,7 +49,6 @@ LANES = 4  # partial sums of λ (Eq. 15) kept apart
 MEMO_BITS = 5
 MEMO = 1 << MEMO_BITS  # entries of a run's ℓ cache (:meth:`MultiaspectKernels.log_ratio`)
 RUN = 256  # slots per run of the particle loops on a CPU (:meth:`MultiaspectKernels.log_ratio`)
-SERIAL_PIXELS = 1 << 16  # d-maps up to this many pixels are computed in the launching thread (no task start)
 
 
 def template_support(th: int, tw: int) -> int:
@@ -73,15 +72,21 @@ def template_pixels(templates: np.ndarray, support: int, row_length: int) -> tup
 
 
 @ti.data_oriented
-class MultiaspectKernels(MultiaspectResampling):
-    """Fields of ``groups`` filters of ``n`` particles for frames of ``shape`` and the (K, h, w) templates."""
+class MultiaspectKernels(MultiaspectResampling, FrameSize):
+    """Fields of ``groups`` filters of ``n`` particles for frames of ``shape`` and the (K, h, w) templates.  The
+    fields that follow the frame (d, the energy tables, the birth proposal) take the extents of the frame's size
+    class (``loops.frame_class``) and the kernels read the frame's (H, W) from ``frame_hw``, so frames of one class
+    share the compiled kernels."""
+
+    FRAME_TABLES = ("energy", "birth_cdf", "birth_lq")  # put() places a frame's table in the class's corner
 
     def __init__(self, groups: int, n: int, shape, template_shape, serial: bool = False):
-        self.groups, self.n, self.shape = int(groups), int(n), (int(shape[0]), int(shape[1]))
+        self.groups, self.n = int(groups), int(n)
         self.k, th, tw = (int(v) for v in template_shape)
         self.support = template_support(th, tw)
         self.halves = ((th - 1) // 2, (tw - 1) // 2)
-        c, g, (h, w) = self.groups * self.n, self.groups, self.shape
+        self.serial = bool(serial)
+        c, g, (h, w) = self.groups * self.n, self.groups, self.frame_size_field(shape)
         self.capacity = c
         self.prev = ti.field(ti.f32, (2 * c, STATE))  # side s: slots [s·C, (s + 1)·C)
         self.prev_z = ti.field(ti.i32, 2 * c)
@@ -105,10 +110,11 @@ class MultiaspectKernels(MultiaspectResampling):
         self.t_off = ti.field(ti.i32, (self.k, self.support))
         self.t_val = ti.field(ti.f32, (self.k, self.support))
         self.t_count = ti.field(ti.i32, self.k)
-        self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))
+        self.energy = ti.field(ti.f32, (3, self.k, h + th - 1, w + tw - 1))  # the frame's in the corner
         self.gcdf = ti.field(ti.f32, (self.k, self.k))  # gcdf[j, i] = Σ_{i' ≤ i} G(i', j): column j's cumulative
         # data-driven births (not in the paper): per group the cumulative proposal q over the extended grid's cells
-        # (row-major, (H + h − 1)·(W + w − 1)) and log(f₀/q) per cell; a particle's birth log-weight correction
+        # (row-major: the frame's (H + h − 1)·(W + w − 1) cells lead the class's) and log(f₀/q) per cell; a particle's
+        # birth log-weight correction
         self.n_cells = (h + th - 1) * (w + tw - 1)
         self.birth_cdf = ti.field(ti.f64, (g, self.n_cells))
         self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
@@ -118,7 +124,6 @@ class MultiaspectKernels(MultiaspectResampling):
         # one group: its serial per-group loops run in the launching thread (a parallel task costs ~0.08 ms to start)
         self.serial_groups = serial or self.groups == 1
         self.span = thread_span(self.serial_groups)
-        self.serial_pixels = serial or self.groups * h * w <= SERIAL_PIXELS  # a small d-map: one thread, no task
         # the particle loops walk runs of RUN consecutive slots, one thread each, reusing ℓ within a run
         # (:meth:`log_ratio`); on a GPU (span 1) a run is one slot
         self.span_particles = thread_span(serial)
@@ -127,13 +132,21 @@ class MultiaspectKernels(MultiaspectResampling):
 
     # ------------------------------------------------------------------ Eq. 16
 
+    def set_frame_size(self, shape) -> None:
+        """The frames are now of ``shape`` (of the fields' class); d is cleared, so that its zero border holds no
+        pixel of a larger frame of the class (fields reused from another tracker, ``backend.reusable``)."""
+        super().set_frame_size(shape)
+        if hasattr(self, "d"):  # not while __init__ makes the fields (new fields hold zeros)
+            self.d.fill(0.0)
+
     @ti.kernel
     def load(self, y: ti.types.ndarray(dtype=ti.f32, ndim=3), gpar: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         """Each group's mean-removed frame y[g] (H, W) and its (β_h, β_v, σ_c²) row: d[g] = A·y[g] = y − β_h·(left
-        + right) − β_v·(up + down), y = 0 outside the image (Eq. 16), into the padded d (its border stays 0)."""
-        h, w = ti.static(self.shape)
+        + right) − β_v·(up + down), y = 0 outside the image (Eq. 16), into the padded d (its border stays 0).
+        Rows in parallel at every frame size (a small frame's d in the launching thread was no faster at 120²)."""
+        h, w = self.frame_hw[0], self.frame_hw[1]
         hh, hw = ti.static(self.halves)
-        ti.loop_config(serialize=self.serial_pixels)
+        ti.loop_config(serialize=self.serial)
         for g, r in ti.ndrange(self.groups, h):  # one loop of rows: a second would be a second task (~0.08 ms)
             if r == 0:
                 for i in range(N_GPAR):
@@ -158,7 +171,7 @@ class MultiaspectKernels(MultiaspectResampling):
     @ti.func
     def vertical(self, y: ti.template(), g: ti.i32, r: ti.i32, c: ti.i32) -> ti.f32:
         """y's pixels above and below (r, c), 0 outside the image (Eq. 16's zero boundary)."""
-        h = ti.static(self.shape[0])
+        h = self.frame_hw[0]
         up = y[g, r - 1, c] if r > 0 else 0.0
         down = y[g, r + 1, c] if r < h - 1 else 0.0
         return up + down
@@ -271,8 +284,8 @@ class MultiaspectKernels(MultiaspectResampling):
 
     @ti.func
     def birth_cell(self, g: ti.i32, u: ti.f64) -> ti.i32:
-        """The first cell whose cumulative proposal exceeds u (birth_cdf ends at 1)."""
-        lo, hi = 0, self.n_cells - 1
+        """The first of the frame's cells whose cumulative proposal exceeds u (birth_cdf ends at 1)."""
+        lo, hi = 0, (self.frame_hw[0] + 2 * self.halves[0]) * (self.frame_hw[1] + 2 * self.halves[1]) - 1
         while lo < hi:
             mid = (lo + hi) // 2
             if self.birth_cdf[g, mid] > u:
@@ -284,13 +297,13 @@ class MultiaspectKernels(MultiaspectResampling):
     @ti.func
     def cell_column(self, cell: ti.i32) -> ti.f32:
         """The centroid column of extended-grid cell ``cell`` (row-major, columns −h_w … W − 1 + h_w)."""
-        width = ti.static(self.shape[1] + 2 * self.halves[1])
+        width = self.frame_hw[1] + 2 * self.halves[1]
         return ti.cast(cell % width - self.halves[1], ti.f32)
 
     @ti.func
     def cell_row(self, cell: ti.i32) -> ti.f32:
         """The centroid row of extended-grid cell ``cell``."""
-        width = ti.static(self.shape[1] + 2 * self.halves[1])
+        width = self.frame_hw[1] + 2 * self.halves[1]
         return ti.cast(cell // width - self.halves[0], ti.f32)
 
     @ti.func
@@ -305,7 +318,7 @@ class MultiaspectKernels(MultiaspectResampling):
     @ti.func
     def on_grid(self, x: ti.f32, y: ti.f32) -> ti.i32:
         """Whether the quantised centroid (Eq. 3) of (x, y) lies on the extended grid."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         hh, hw = ti.static(self.halves)
         c = ti.cast(ti.floor(x + 0.5), ti.i32)
         r = ti.cast(ti.floor(y + 0.5), ti.i32)
@@ -315,7 +328,7 @@ class MultiaspectKernels(MultiaspectResampling):
     def p_inside(self, mx: ti.f32, my: ti.f32, sd: ti.f32) -> ti.f32:
         """P_in of Eq. 6 (notes A1): Φ-differences of the extended grid's edges around the predicted (mx, my);
         exactly 1 in f32 when every edge is ≥ ERF_END/s away (erf is then 1 to f32 precision), so erf is skipped."""
-        h, w = ti.static(self.shape)
+        h, w = self.frame_hw[0], self.frame_hw[1]
         hh, hw = ti.static(self.halves)
         s = ti.f32(SQRT_HALF) / ti.max(sd, 1e-12)
         near = ti.min(ti.min(w - 0.5 + hw - mx, mx + hw + 0.5), ti.min(h - 0.5 + hh - my, my + hh + 0.5)) * s
@@ -413,9 +426,12 @@ class MultiaspectKernels(MultiaspectResampling):
         return self.prev.to_numpy()[side * c:(side + 1) * c], self.prev_z.to_numpy()[side * c:(side + 1) * c]
 
     def put(self, name: str, values) -> None:
-        """Field ``name`` ← ``values`` (its whole shape)."""
+        """Field ``name`` ← ``values`` (its whole shape; a FRAME_TABLES table of the frame: the class's corner)."""
         field = getattr(self, name)
-        field.from_numpy(np.ascontiguousarray(values, dtype=_NP[field.dtype]).reshape(field.shape))
+        values = np.ascontiguousarray(values, dtype=_NP[field.dtype])
+        if name in self.FRAME_TABLES:
+            values = in_corner(values, field.shape)
+        field.from_numpy(values.reshape(field.shape))
 
     def get(self, name: str) -> np.ndarray:
         """A copy of field ``name``."""

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 POOL_AT_SIZE = """
@@ -223,3 +225,11 @@ def test_feature_fusion_at_a_new_frame_size_of_its_size_class_compiles_nothing(t
     40 × 330 (384 columns: another class) compiles some."""
     assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [(40, 50, "feature-fusion"), (61, 37, "feature-fusion")],
                                      (40, 330, "feature-fusion"))
+
+
+@pytest.mark.parametrize("method", ["ma-rs", "ma-apf"])
+def test_multiaspect_at_a_new_frame_size_of_its_size_class_compiles_nothing(tmp_path, method):
+    """The multiaspect filters' frame tables (the padded d-map, the energy tables, the birth proposal) take the size
+    class's extents and the kernels read (H, W) from ``frame_hw``: 40 × 50 and 61 × 37 share every kernel;
+    40 × 330 (384 columns: another class) compiles some."""
+    assert_built_once_per_size_class(tmp_path, METHOD_AT_SIZE, [(40, 50, method), (61, 37, method)], (40, 330, method))

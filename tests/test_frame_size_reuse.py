@@ -1,6 +1,7 @@
 """Fields reused by a tracker at another frame size of their size class (``backend.reusable``) give the same tracks
-as fields of its own, for MM-PHD, top-hat + PF and feature-fusion (SGDS-PF's: tests/test_sgds.py): nothing of the
-other frame's values, past the smaller frame or at the other width, reaches the tracks."""
+as fields of its own, for MM-PHD, top-hat + PF, feature-fusion and the multiaspect filters (SGDS-PF's:
+tests/test_sgds.py): nothing of the other frame's values, past the smaller frame or at the other width, reaches the
+tracks."""
 import gc
 
 import numpy as np
@@ -10,7 +11,7 @@ import tbd_taichi as tbd
 from tbd_taichi import methods
 
 SHAPES = ((33, 40), (61, 57))
-SNR = {"mm-phd": 3.0, "tophat-pf": 8.0, "feature-fusion": 6.0}
+SNR = {"mm-phd": 3.0, "tophat-pf": 8.0, "feature-fusion": 6.0, "ma-rs": 6.0}
 
 
 def first_box(scene):
@@ -19,7 +20,7 @@ def first_box(scene):
     return (float(row["x"]) - 3.0, float(row["y"]) - 3.0, 7.0, 7.0)
 
 
-@pytest.mark.parametrize("method", ["mm-phd", "tophat-pf", "feature-fusion"])
+@pytest.mark.parametrize("method", ["mm-phd", "tophat-pf", "feature-fusion", "ma-rs"])
 def test_fields_reused_at_another_size_of_the_class_give_the_same_tracks(method):
     scenes = {shape: tbd.simulate(shape, 24, snr=SNR[method], seed=6) for shape in SHAPES}
 
@@ -30,7 +31,7 @@ def test_fields_reused_at_another_size_of_the_class_give_the_same_tracks(method)
         return tracker, np.asarray(rows + list(tracker.finish()), dtype=object)
 
     def fields(tracker):
-        return tracker.pool.k._target if method == "mm-phd" else tracker.k._target
+        return tracker.pool.k._target if method in ("mm-phd", "ma-rs") else tracker.k._target
 
     for shape, other in (SHAPES, SHAPES[::-1]):
         own, fresh = run(shape)  # kept alive: its fields are not lent

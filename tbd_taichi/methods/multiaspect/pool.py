@@ -7,10 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import backend
-from ...engines import kernel_module
+from ...engines import frame_kernels
 from ...kernels.multiaspect import STATE, SUM_ABSENT, SUM_ASPECT, SUM_X
-from ...launch import Launcher
 from ...multiaspect import energy_tables
 
 FILTERS = ("rs", "apf")
@@ -42,11 +40,8 @@ class MultiaspectPool:
 
     def __init__(self, shape, template_shape, G: np.ndarray, groups: int, n: int, seed: int, engine: str,
                  arch: str | None = None):
-        module = kernel_module(engine, "multiaspect", arch)
         dims = (int(groups), int(n), tuple(int(v) for v in shape), tuple(int(v) for v in template_shape))
-        # Taichi compiles a data-oriented object's kernels once per object: reuse a finished pool's of these sizes
-        self.k = module.MultiaspectKernels(*dims) if engine == "numpy" else \
-            Launcher(backend.reusable(self, ("multiaspect",) + dims, lambda: module.MultiaspectKernels(*dims)))
+        self.k = frame_kernels(self, engine, "multiaspect", "MultiaspectKernels", dims, shape, arch)
         self.groups, self.n, self.shape, self.seed = int(groups), int(n), tuple(shape), int(seed)
         self.sums = np.zeros((self.groups, SUM_ASPECT + int(template_shape[0])))
         cdf = np.cumsum(G, axis=0).T.copy()  # row j: column j of G, cumulated
