@@ -31,9 +31,9 @@ def add_warmup_parser(sub, common) -> None:
                         description="Run each method over a short simulated sequence of frames of --shape under "
                                     "each --profile, so that Taichi compiles its kernels, and write them to the "
                                     "offline cache: later runs at that frame size load them instead of compiling "
-                                    "(for container builds and cluster job prologues). SGDS-PF, MM-PHD and "
-                                    "top-hat + PF compile per size class, so the default 256 x 320 serves them for "
-                                    "every frame up to that size (SGDS-PF: of up to 8 search blocks).")
+                                    "(for container builds and cluster job prologues). Every method compiles per "
+                                    "size class, so the default 256 x 320 serves every frame up to that size "
+                                    "(SGDS-PF: of up to 8 search blocks).")
     wa.add_argument("--method", action="append", default=None, metavar="NAME",
                     help=f"a method to compile, repeatable or a comma list, of {','.join(methods.names())} "
                          "(default: all)")
