@@ -150,7 +150,23 @@ def check_evaluate_suite(args) -> dict:
         validate.output_path("--out-dir", out_dir)  # a new folder: its parent must exist and be writable
     workers = args.workers or os.cpu_count() or 1
     return dict(chosen=chosen, snrs=snrs, sizes=sizes, tests=tests, out_dir=out_dir, scheduler=scheduler,
-                workers=workers)
+                workers=workers, params=checked_suite_params(args, chosen, snrs, sizes))
+
+
+def checked_suite_params(args, chosen, snrs, sizes) -> dict:
+    """evaluate-suite's --param settings ({name: value}), checked for every method, size and SNR preset before any
+    run (a ParameterError naming the problem); only the jia2022 suite takes them."""
+    if not args.param:
+        return {}
+    if args.scenario != "jia2022":
+        raise TBDError(f"--param applies to --scenario jia2022, not {args.scenario}")
+    settings = {}
+    for method in chosen:
+        spec = methods.get(method)
+        settings = spec.parse_assignments(args.param)
+        for (side, _), snr in ((size, snr) for size in sizes for snr in snrs):
+            methods.checked_settings(spec, (side, side), {"snr": args.tracker_snr or snr, **settings})
+    return settings
 
 
 def suite_fans_out(args) -> bool:
@@ -169,7 +185,8 @@ def cmd_evaluate_suite(args) -> int:
     if args.scenario == "guler2016":
         return run_guler2016_suite(args, plan["chosen"], plan["tests"], plan["out_dir"])
     chosen, snrs, sizes, tests, out_dir = (plan[k] for k in ("chosen", "snrs", "sizes", "tests", "out_dir"))
-    runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0, explain=args.explain)
+    runs = suite.plan(snrs, sizes, chosen, tests, args.seed, args.tracker_snr or 0.0, explain=args.explain,
+                      params=plan["params"])
     out_dir.mkdir(exist_ok=True)
     workers = plan["workers"]
     where = plan["scheduler"] or f"{workers} worker(s)"
@@ -180,7 +197,8 @@ def cmd_evaluate_suite(args) -> int:
                                        say=lambda text: print(text, flush=True))
     command = (f"tbd-taichi evaluate-suite --tests {tests} --snrs {','.join(f'{v:g}' for v in snrs)} "
                f"--size {args.size} --methods {','.join(chosen)} --seed {args.seed} "
-               + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "") + f"--out-dir {out_dir}")
+               + (f"--tracker-snr {args.tracker_snr:g} " if args.tracker_snr else "")
+               + "".join(f"--param {item} " for item in args.param) + f"--out-dir {out_dir}")
     report = suite.write_report(results, out_dir, command, completed, len(runs))
     print(suite.markdown_table(suite.summarise(results)))
     if args.explain:
@@ -341,6 +359,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="for each missed or late SGDS-PF run, the stage that lost the target (never a candidate, no "
                          "potential target, never confirmed, confirmed then dropped, or the slowest step); writes "
                          "OUT_DIR/explain.md")
+    es.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="jia2022: a parameter of every --methods tracker over its SNR preset (repeatable; e.g. "
+                         "N_sump=6000 with --methods sgds), to compare a setting on the same scenes (give it an "
+                         "--out-dir of its own)")
     es.add_argument("--no-progress", action="store_true", help="no progress bar")
     _common(es)
     es.set_defaults(func=cmd_evaluate_suite, check=check_evaluate_suite, fans_out=suite_fans_out)

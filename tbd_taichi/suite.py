@@ -43,19 +43,27 @@ class Run:
     seed: int
     preset_snr: float = 0.0  # the trackers' snr parameter; 0: the condition's SNR
     explain: bool = False  # SGDS-PF: record which stage lost the target (methods/sgds/explain.py)
+    params: tuple = ()  # (name, value) pairs over the tracker's preset (evaluate-suite --param), sorted
 
     @property
     def key(self) -> str:
         preset = f"/preset{self.preset_snr:g}" if self.preset_snr else ""
-        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}" + ("/explain" if self.explain else "")
+        return f"{self.method}/{self.side}/{self.snr:g}/{self.seed}{preset}" + ("/explain" if self.explain else "") \
+            + (f"/{params_label(self.params)}" if self.params else "")
+
+
+def params_label(params) -> str:
+    """(name, value) pairs as "name=value,…" (a run's key, a table's method column)."""
+    return ",".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in params)
 
 
 def plan(snrs=SNRS, sizes=SIZES, methods=DEFAULT_METHODS, tests: int = 100, seed: int = 0, preset_snr: float = 0.0,
-         explain: bool = False) -> list[Run]:
+         explain: bool = False, params=None) -> list[Run]:
     """Every run of the suite; test k uses scenario seed ``seed + k``.  ``preset_snr`` > 0 gives
     every tracker that ``snr`` (Table 2 / Table 3 column) instead of the condition's SNR; ``explain`` records
-    the stages of SGDS-PF's runs."""
-    return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr), explain and m == "sgds")
+    the stages of SGDS-PF's runs; ``params`` ({name: value}) sets parameters of every tracker over its preset."""
+    pairs = tuple(sorted((params or {}).items()))
+    return [Run(m, side, frames, float(snr), k, seed + k, float(preset_snr), explain and m == "sgds", pairs)
             for side, frames in sizes for snr in snrs for k in range(tests) for m in methods]
 
 
@@ -75,16 +83,16 @@ def run_one(run: Run) -> dict:
     from .simulate import simulate
 
     scene = simulate((run.side, run.side), frames=run.frames, snr=run.snr, seed=run.seed)
-    preset = run.preset_snr or run.snr
-    warm_up = (run.method, run.side, preset)
+    preset, params = run.preset_snr or run.snr, dict(run.params)
+    warm_up = (run.method, run.side, preset, run.params)
     if warm_up not in _WARM:  # compile this configuration's kernels outside the timing: the same run, untimed
-        warm = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper")
+        warm = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper", **params)
         for frame in scene.frames:  # whole: kernels first used late (the first hand-over, a track's step) too
             warm.update(frame)
         warm.finish()
         del warm
         _WARM.add(warm_up)
-    tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper")
+    tracker = make_tracker(run.method, (run.side, run.side), snr=preset, seed=run.seed, profile="paper", **params)
     recorder = None
     if run.explain:  # watches the tracker; the tracks are the same
         from .methods.sgds.explain import StageRecorder
@@ -158,18 +166,23 @@ def machine_label(result: dict) -> str:
 
 
 def summarise(results: list[dict]) -> list[dict]:
-    """One row per (size, SNR, method): n, TSR, mean EDT, mean DSR, false tracks/sequence, ms/frame."""
+    """One row per (size, SNR, method, parameters set): n, TSR, mean EDT, mean DSR, false tracks/sequence,
+    ms/frame."""
     rows = []
-    keys = sorted({(r["side"], r["frames"], r["snr"], r["method"]) for r in results},
-                  key=lambda k: (k[0], k[2], _rank(k[3])))
-    for side, frames, snr, method in keys:
-        sel = [r for r in results if (r["side"], r["frames"], r["snr"], r["method"]) == (side, frames, snr, method)]
+
+    def group(r) -> tuple:
+        return r["side"], r["frames"], r["snr"], r["method"], tuple(tuple(p) for p in r.get("params") or ())
+
+    keys = sorted({group(r) for r in results}, key=lambda k: (k[0], k[2], _rank(k[3]), k[4]))
+    for side, frames, snr, method, params in keys:
+        sel = [r for r in results if group(r) == (side, frames, snr, method, params)]
         presets = sorted({r.get("preset_snr") or r["snr"] for r in sel})
         machines = sorted({machine_label(r) for r in sel})
         dsr = np.array([r["dsr"] for r in sel], float)
         edt = np.array([r["edt"] for r in sel if r["dsr"] > metrics.T1], float)
         edt = edt[np.isfinite(edt)]
-        rows.append(dict(side=side, frames=frames, snr=snr, method=method, preset=presets, machines=machines,
+        rows.append(dict(side=side, frames=frames, snr=snr, method=method, params=params, preset=presets,
+                         machines=machines,
                          n=len(sel), tsr=metrics.tsr(dsr),
                          edt=float(edt.mean()) if edt.size else float("nan"), dsr=float(np.nanmean(dsr)),
                          false_tracks=float(np.mean([r["false_tracks"] for r in sel])),
@@ -191,14 +204,15 @@ def method_title(method: str) -> str:
     return methods.get(method).title if method in methods.names() else method
 
 
-def configured_particles(method: str, side: int, preset: float) -> int:
-    """Particles the tracker is configured with for a side × side frame at the ``preset`` SNR (the method's
-    ``particle_count``: the original PF's Table 3 count, SGDS-PF's N_sump × blocks); 0 if it does not say."""
+def configured_particles(method: str, side: int, preset: float, params=()) -> int:
+    """Particles the tracker is configured with for a side × side frame at the ``preset`` SNR with ``params``
+    ((name, value) pairs) over it (the method's ``particle_count``: the original PF's Table 3 count, SGDS-PF's
+    N_sump × blocks); 0 if it does not say."""
     from . import methods
 
     spec = methods.get(method)
     shape = (side, side)
-    return spec.particles(shape, spec.make_params(shape, snr=preset))
+    return spec.particles(shape, spec.make_params(shape, snr=preset, **dict(params)))
 
 
 def markdown_table(rows: list[dict]) -> str:
@@ -211,8 +225,10 @@ def markdown_table(rows: list[dict]) -> str:
              "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---|" if several else "")]
     for r in rows:
         presets = r.get("preset") or [r["snr"]]
-        particles = "/".join(f"{configured_particles(r['method'], r['side'], v):,}" for v in presets)
-        lines.append(f"| {r['side']}×{r['side']}×{r['frames']} | {r['snr']:g} | {method_title(r['method'])} "
+        params = r.get("params") or ()
+        particles = "/".join(f"{configured_particles(r['method'], r['side'], v, params):,}" for v in presets)
+        title = method_title(r["method"]) + (f" ({params_label(params)})" if params else "")
+        lines.append(f"| {r['side']}×{r['side']}×{r['frames']} | {r['snr']:g} | {title} "
                      f"| {'/'.join(f'{v:g}' for v in presets)} | {particles} "
                      f"| {r['n']} | {r['tsr']:.2f} | {r['edt']:.2f} | {r['dsr']:.2f} | {r['false_tracks']:.2f} "
                      f"| {r['ms_per_frame']:.1f} |"

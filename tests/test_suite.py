@@ -91,3 +91,40 @@ def test_cli_evaluate_suite(tmp_path, capsys):
         cli.main(["evaluate-suite", "--tracker-snr", "0", "--out-dir", str(out)])
     assert usage.value.code == 2
     assert "--tracker-snr" in capsys.readouterr().err
+
+
+def test_param_settings_are_their_own_condition_and_reach_the_tracker(tmp_path, capsys, monkeypatch):
+    """--param runs are keyed and summarised apart from the presets' (a results file may hold both); the table
+    names the setting and counts its particles; a real run's tracker gets it; a bad name, value or scenario is one
+    line before any run."""
+    preset = suite.plan(snrs=(1.4,), sizes=((200, 150),), methods=("sgds",), tests=2)
+    fewer = suite.plan(snrs=(1.4,), sizes=((200, 150),), methods=("sgds",), tests=2, params={"N_sump": 6000})
+    assert not {r.key for r in preset} & {r.key for r in fewer}
+    assert fewer[0].key.endswith("/N_sump=6000") and fewer[0].params == (("N_sump", 6000),)
+    rows = suite.summarise([fake(r, 0.9) for r in preset] + [fake(r, 0.1) for r in fewer])
+    assert [(r["params"], r["tsr"]) for r in rows] == [((), 1.0), ((("N_sump", 6000),), 0.0)]
+    table = suite.markdown_table(rows)
+    assert "| SGDS-PF | 1.4 | 32,000 |" in table and "| SGDS-PF (N_sump=6000) | 1.4 | 24,000 |" in table
+    from tbd_taichi import methods
+
+    made, make = [], methods.make_tracker
+    monkeypatch.setattr(methods, "make_tracker", lambda *a, **kw: made.append(kw) or make(*a, **kw))
+    (run,) = suite.plan(snrs=(3.0,), sizes=((40, 40),), methods=("pf",), tests=1, params={"n_particles": 700})
+    assert suite.run_one(run)["params"] == (("n_particles", 700),)
+    assert made and all(kw["n_particles"] == 700 for kw in made)
+    monkeypatch.undo()
+    out = tmp_path / "res"
+    assert cli.main(["evaluate-suite", "--snrs", "3", "--size", "50", "--tests", "1", "--workers", "1",
+                     "--methods", "pf", "--param", "n_particles=700", "--no-progress", "--out-dir", str(out)]) == 0
+    (stored,) = [json.loads(line) for line in (out / "suite_runs.jsonl").read_text().splitlines()]
+    assert stored["params"] == [["n_particles", 700]] and stored["key"].endswith("/n_particles=700")
+    assert "--param n_particles=700" in json.loads((out / "suite.json").read_text())["command"]
+    capsys.readouterr()
+    for argv, message in ((["--methods", "sgds,pf", "--param", "N_sump=6000"], "unknown original PF parameter"),
+                          (["--methods", "sgds", "--param", "N_sump=6"], "N_sump = 6 must be"),
+                          (["--scenario", "long2012", "--methods", "mm-phd", "--param", "births=10"],
+                           "--param applies to --scenario jia2022")):
+        assert cli.main(["evaluate-suite", *argv, "--out-dir", str(tmp_path / "bad")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
