@@ -104,7 +104,8 @@ def run_one(run: Run) -> dict:
     tracks = tracker.finish()
     ms = (time.perf_counter() - t0) / run.frames * 1e3
     scores = metrics.evaluate(tracks, scene.truth, n_frames=run.frames)
-    row = dict(asdict(run), key=run.key, dsr=scores["dsr"], edt=edt_when_detected(tracks, scene.truth),
+    row = dict(asdict(run), key=run.key, params=[list(p) for p in run.params],  # as the runs file holds it
+               dsr=scores["dsr"], edt=edt_when_detected(tracks, scene.truth),
                false_tracks=int(scores["false_tracks"]), ospa=scores["ospa"], ms_per_frame=ms,
                machine=machine_description())
     if recorder is not None:

@@ -110,7 +110,7 @@ def test_param_settings_are_their_own_condition_and_reach_the_tracker(tmp_path, 
     made, make = [], methods.make_tracker
     monkeypatch.setattr(methods, "make_tracker", lambda *a, **kw: made.append(kw) or make(*a, **kw))
     (run,) = suite.plan(snrs=(3.0,), sizes=((40, 40),), methods=("pf",), tests=1, params={"n_particles": 700})
-    assert suite.run_one(run)["params"] == (("n_particles", 700),)
+    assert suite.run_one(run)["params"] == [["n_particles", 700]]  # JSON's shape, as the runs file holds it
     assert made and all(kw["n_particles"] == 700 for kw in made)
     monkeypatch.undo()
     out = tmp_path / "res"
