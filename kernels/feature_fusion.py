@@ -88,21 +88,21 @@ class FeatureFusionKernels(FrameSize):
         ``write_raw``, ``raw`` (3, H, W) gets the unquantised values (frame 0 sets the ranges from them).  The
         zero border is written too: the fields may hold a larger frame of the class (``backend.reusable``)."""
         h, w, m = self.frame_hw[0], self.frame_hw[1], ti.static(self.margin)
-        rows, columns = ti.static(self.frame_extents)  # static loops over the class, the frame's pixels inside:
-        for r, c in ti.ndrange(rows + 2 * m, columns + 2 * m):  # faster than loops to (h, w) read at run time
-            if r < h + 2 * m and c < w + 2 * m:
+        columns = ti.static(self.frame_extents[1])  # rows to the frame's, columns to the class's: a static row
+        for r, c in ti.ndrange(h + 2 * m, columns + 2 * m):  # length (no division by W per pixel)
+            if c < w + 2 * m:
                 v = ti.f32(0.0)
                 if m <= r < h + m and m <= c < w + m:  # a statement: the frame is read only inside
                     v = frame[r - m, c - m]
                 self.image[r, c] = v
-        for r, c in ti.ndrange(rows + 2 * m, columns):  # the border rows too: zeros (the image's border is)
-            if r < h + 2 * m and c < w:
+        for r, c in ti.ndrange(h + 2 * m, columns):  # the border rows too: zeros (the image's border is)
+            if c < w:
                 acc = ti.f32(0.0)
                 for k in ti.static(range(-self.gx, self.gx + 1)):
                     acc += self.row_taps[k + self.gx] * self.image[r, c + m + k]
                 self.rowpass[r, c] = acc
-        for r, c in ti.ndrange(rows, columns):
-            if r < h and c < w:
+        for r, c in ti.ndrange(h, columns):
+            if c < w:
                 self.pixel_features(r, c, raw, write_raw)
 
     @ti.func
@@ -136,11 +136,11 @@ class FeatureFusionKernels(FrameSize):
     @ti.kernel
     def rebin(self, raw: ti.types.ndarray(dtype=ti.f32, ndim=3)):
         """binmap from the unquantised maps and the current ranges (frame 0, once the ranges are set)."""
-        h, w = self.frame_hw[0], self.frame_hw[1]
-        rows, columns = ti.static(self.frame_extents)
-        for f, r, c in ti.ndrange(FEATURES, rows, columns):
-            if r < h and c < w:
-                self.binmap[f, r, c] = self.bin_of(f, raw[f, r, c])
+        h, w, columns = self.frame_hw[0], self.frame_hw[1], ti.static(self.frame_extents[1])
+        for r, c in ti.ndrange(h, columns):  # as in feature_maps
+            if c < w:
+                for f in ti.static(range(FEATURES)):
+                    self.binmap[f, r, c] = self.bin_of(f, raw[f, r, c])
 
     # ------------------------------------------------------------------ Eqs. 11–13, 19–22: one launch, all particles
 
