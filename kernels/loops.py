@@ -78,12 +78,16 @@ class FrameSize:
         """Make ``frame_hw`` for frames of ``shape``; returns their size class (rows, columns)."""
         self.frame_hw = ti.field(ti.i32, 2)
         self.frame_extents = frame_class(shape)
-        self.set_frame_size(shape)
+        self._store_frame_size(shape)
         return self.frame_extents
 
     def set_frame_size(self, shape) -> None:
-        """The frames are now of ``shape``, of the fields' size class (fields reused by another tracker)."""
+        """The frames are now of ``shape``, of the fields' size class (fields reused by another tracker; a class
+        may extend this to clear what a larger frame of the class left)."""
         if frame_class(shape) != self.frame_extents:
             raise ValueError(f"frames of {tuple(shape)} are not of the fields' size class {self.frame_extents}")
+        self._store_frame_size(shape)
+
+    def _store_frame_size(self, shape) -> None:
         self.shape = (int(shape[0]), int(shape[1]))
         self.frame_hw.from_numpy(np.array(self.shape, np.int32))

@@ -136,8 +136,7 @@ class MultiaspectKernels(MultiaspectResampling, FrameSize):
         """The frames are now of ``shape`` (of the fields' class); d is cleared, so that its zero border holds no
         pixel of a larger frame of the class (fields reused from another tracker, ``backend.reusable``)."""
         super().set_frame_size(shape)
-        if hasattr(self, "d"):  # not while __init__ makes the fields (new fields hold zeros)
-            self.d.fill(0.0)
+        self.d.fill(0.0)
 
     @ti.kernel
     def load(self, y: ti.types.ndarray(dtype=ti.f32, ndim=3), gpar: ti.types.ndarray(dtype=ti.f32, ndim=2)):

@@ -33,7 +33,8 @@ def frame_kernels(owner, engine: str, concept: str, name: str, dims: tuple, shap
     """``owner``'s instance of class ``name`` of ``concept``'s module for ``engine``, made with ``dims`` (the
     frame's ``shape`` (H, W) among them).  NumPy's is made anew.  Taichi's fields take the extents of the frame's
     size class (``kernels.loops.FrameSize``): they come from a finished owner of the same dims but for a frame of
-    the same class (``backend.reusable``: no recompilation), are set to ``shape`` and launched by the lean path."""
+    the same class (``backend.reusable``: no recompilation; then set to ``shape``) or are made for ``shape``, and
+    are launched by the lean path."""
     cls = getattr(kernel_module(engine, concept, arch), name)
     if engine == "numpy":
         return cls(*dims)
@@ -44,5 +45,6 @@ def frame_kernels(owner, engine: str, concept: str, name: str, dims: tuple, shap
     shape = (int(shape[0]), int(shape[1]))
     key = (concept, name, frame_class(shape)) + tuple(v for v in dims if v != shape)
     fields = backend.reusable(owner, key, lambda: cls(*dims))
-    fields.set_frame_size(shape)
+    if backend.holds_old_values(fields):  # lent: its frame size is its last owner's
+        fields.set_frame_size(shape)
     return Launcher(fields)
