@@ -164,6 +164,9 @@ def checked_suite_params(args, chosen, snrs, sizes) -> dict:
     for method in chosen:
         spec = methods.get(method)
         settings = spec.parse_assignments(args.param)
+        if "snr" in settings:
+            raise TBDError("--param snr: the suite gives each tracker its condition's SNR preset; set another "
+                           "with --tracker-snr")
         for (side, _), snr in ((size, snr) for size in sizes for snr in snrs):
             methods.checked_settings(spec, (side, side), {"snr": args.tracker_snr or snr, **settings})
     return settings

@@ -122,6 +122,7 @@ def test_param_settings_are_their_own_condition_and_reach_the_tracker(tmp_path, 
     capsys.readouterr()
     for argv, message in ((["--methods", "sgds,pf", "--param", "N_sump=6000"], "unknown original PF parameter"),
                           (["--methods", "sgds", "--param", "N_sump=6"], "N_sump = 6 must be"),
+                          (["--methods", "sgds", "--param", "snr=1.2"], "--tracker-snr"),
                           (["--scenario", "long2012", "--methods", "mm-phd", "--param", "births=10"],
                            "--param applies to --scenario jia2022")):
         assert cli.main(["evaluate-suite", *argv, "--out-dir", str(tmp_path / "bad")]) == 2
