@@ -115,9 +115,9 @@ class MultiaspectKernels(MultiaspectResampling, FrameSize):
         # data-driven births (not in the paper): per group the cumulative proposal q over the extended grid's cells
         # (row-major: the frame's (H + h − 1)·(W + w − 1) cells lead the class's) and log(f₀/q) per cell; a particle's
         # birth log-weight correction
-        self.n_cells = (h + th - 1) * (w + tw - 1)
-        self.birth_cdf = ti.field(ti.f64, (g, self.n_cells))
-        self.birth_lq = ti.field(ti.f32, (g, self.n_cells))
+        cells = (h + th - 1) * (w + tw - 1)  # the class's; a frame's: birth_cell
+        self.birth_cdf = ti.field(ti.f64, (g, cells))
+        self.birth_lq = ti.field(ti.f32, (g, cells))
         self.blw = ti.field(ti.f32, c)
         self.tables, self.exp_tables = NormalTables.shared(), ExponentialTables.shared()
         self.erf_table = ErfTable.shared()

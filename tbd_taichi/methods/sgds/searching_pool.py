@@ -30,16 +30,19 @@ class SearchingPool(ParticlePool):
              seq_out: np.ndarray | None = None, quota: int | None = None):
         """:meth:`ParticlePool.step`; with ``quota``, the populations it numbers serve
         :meth:`eliminate_and_hand_over_numbered` until the pool changes."""
-        read = super().step(frame, z, n_out, systematic, top_up, seq_out, quota)
-        self._numbered = None if quota is None else (read, self.changes)
-        return read
+        return self._kept_numbers(super().step(frame, z, n_out, systematic, top_up, seq_out, quota), quota)
 
     def step_with(self, other: ParticlePool, frame: int, z: np.ndarray, top_up=None,
                   seq_out: np.ndarray | None = None, quota: int | None = None) -> tuple:
         """:meth:`ParticlePool.step_with`, keeping the numbered populations as :meth:`step` does."""
         read, estimates = super().step_with(other, frame, z, top_up, seq_out, quota)
+        return self._kept_numbers(read, quota), estimates
+
+    def _kept_numbers(self, read, quota):
+        """A step's read-out ``read``, kept (with the pool's change count) as the numbered populations when the
+        step had a ``quota``; returned as it is."""
         self._numbered = None if quota is None else (read, self.changes)
-        return read, estimates
+        return read
 
     def _read_out_buffer(self, seq_out, quota, n_out: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`ParticlePool._read_out_buffer`; with ``quota`` (Eq. 37's particles a group, a whole number in
