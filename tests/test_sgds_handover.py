@@ -63,37 +63,79 @@ def test_recent_frames_keep_the_k_frames_before_in_a_bordered_ring():
     assert handover.RecentFrames(0, SHAPE).before(1)[0].tolist() == []
 
 
-@pytest.mark.parametrize("kernels", [taichi_handover, numpy_handover], ids=["taichi", "numpy"])
+KERNELS = pytest.mark.parametrize("kernels", [taichi_handover, numpy_handover], ids=["taichi", "numpy"])
+
+
+def sums(kernels, members: dict, recent, frame: int) -> np.ndarray:
+    """The retrodicted sums s_i of every member (one PP, all E = 1), from the kernel's ``scores[0]``."""
+    n = len(members["x"])
+    state = np.stack([members[k] for k in ("x", "y", "vx", "vy", "inten")] + [np.ones(n, np.float32)])
+    back, slots = recent.before(frame)
+    scores = np.zeros((2, n))
+    kernels.multi_frame_draws(state, np.array([[0], [n], [0]], np.int32), recent.frames,
+                              np.stack([back, slots.astype(np.float32)]), np.array([*CONSTANTS, recent.shape[0], 4, 0.5]),
+                              np.zeros(4, np.int32), scores)
+    return scores[0]
+
+
+@KERNELS
 def test_the_sum_takes_each_particle_back_along_its_own_velocity(kernels):
     """s = Σ_j Eq. 15 at (x − j·vx, y − j·vy) on z_{f−j}: a particle whose velocity leads back to the spots
     scores each spot's log ratio; one with the opposite velocity scores what its wrong positions give."""
     x, y, vx, vy, inten = 20.3, 15.6, 0.7, -0.4, 6.0
     spots = {10 - j: spot(x - j * vx, y - j * vy, inten) for j in (3, 2, 1)}
-    s = handover.retrodicted_log_ratio(kernels, pp(2, x=x, y=y, vx=[vx, -vx], vy=[vy, -vy], inten=inten),
-                                       ring(spots), 10, SIGMAS)
+    s = sums(kernels, pp(2, x=x, y=y, vx=[vx, -vx], vy=[vy, -vy], inten=inten), ring(spots), 10)
     for k, sign in enumerate((1, -1)):
         expected = sum(float(point_psf_log_ratio(np.float32([x - j * sign * vx]), np.float32([y - j * sign * vy]),
                                                  np.float32([inten]), spots[10 - j], CONSTANTS)[0]) for j in (3, 2, 1))
         assert s[k] == pytest.approx(expected, rel=1e-5)
     assert s[0] > s[1] + 10  # on the spots vs beside them
-    assert np.all(handover.retrodicted_log_ratio(kernels, pp(3), ring({}), 10, SIGMAS) == 0)
+    assert np.all(sums(kernels, pp(3), ring({}), 10) == 0)
 
 
 @pytest.mark.parametrize("shape", [(9, 11), (40, 48)])
 def test_kernel_matches_twin_on_random_particles_at_borders_and_beyond(rng, shape):
-    """Random particles over and around odd-sized frames (windows cut by every border, some wholly outside),
-    random velocities and intensities, a ring that has wrapped: the kernel against its NumPy twin (f32 ratios:
-    a few ulps of the sum)."""
+    """Random particles over and around odd-sized frames (windows cut by every border, some wholly outside), random
+    velocities, intensities and E, five PPs of uneven sizes (one without E = 1, one of a single particle) with
+    jitter, a ring that has wrapped: the kernel's sums and draws against its NumPy twin's (f32 ratios: a few ulps
+    of the sums; the jitter is the host's, the same for both)."""
     recent = handover.RecentFrames(5, shape)
     for f in range(9):
         recent.add(f, (rng.standard_normal(shape) * 3).astype(np.float32))
     n = 3000
-    state = pp(n, x=rng.uniform(-6, shape[1] + 5, n), y=rng.uniform(-6, shape[0] + 5, n),
-               vx=rng.normal(0, 1.5, n), vy=rng.normal(0, 1.5, n), inten=rng.uniform(0, 8, n))
-    got = handover.retrodicted_log_ratio(taichi_handover, state, recent, 8, SIGMAS)
-    want = handover.retrodicted_log_ratio(numpy_handover, state, recent, 8, SIGMAS)
-    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-4)
-    assert np.count_nonzero(want) > n // 2 and np.any(want == 0)  # inside and wholly outside
+    members = pp(n, x=rng.uniform(-6, shape[1] + 5, n), y=rng.uniform(-6, shape[0] + 5, n),
+                 vx=rng.normal(0, 1.5, n), vy=rng.normal(0, 1.5, n), inten=rng.uniform(0, 8, n),
+                 e=rng.random(n) < 0.7)
+    members["e"][2000:2100] = 0
+    pps = [(0, 700), (900, 1), (1000, 1000), (2000, 100), (2200, 800)]
+    np.testing.assert_allclose(sums(taichi_handover, members, recent, 8), sums(numpy_handover, members, recent, 8),
+                               rtol=1e-5, atol=1e-4)
+    got = handover.multi_frame_draws(taichi_handover, {k: v.copy() for k, v in members.items()}, pps, 333, recent, 8,
+                                     SIGMAS, [np.random.default_rng(k) for k in range(5)], 0.3)
+    want = handover.multi_frame_draws(numpy_handover, {k: v.copy() for k, v in members.items()}, pps, 333, recent, 8,
+                                      SIGMAS, [np.random.default_rng(k) for k in range(5)], 0.3)
+    same = np.mean([np.mean(a == b) for a, b in zip(got, want)])
+    assert same > 0.99, same  # the cumulative weights' f64 exponentials may differ by an ulp at a boundary
+    for (start, size), picks in zip(pps, got):
+        assert np.all((picks >= start) & (picks < start + size)) and np.all(np.diff(picks) >= 0)
+        assert members["e"][picks].all() or start == 2000  # E = 1 only, but where the PP has none
+
+
+@KERNELS
+def test_the_kernel_draw_is_the_host_systematic_draw(rng, kernels):
+    """Member i takes the draws whose point (u + j)/size falls in its share of the cumulative weights: the kernel's
+    counts ⌈c_i/c·size − u⌉ give the picks of NumPy's searchsorted on the normalised cumulative weights."""
+    recent = ring({f: rng.standard_normal(SHAPE).astype(np.float32) for f in range(4, 12)})
+    members = pp(500, x=rng.uniform(0, 48, 500), y=rng.uniform(0, 40, 500), vx=rng.normal(0, 1, 500),
+                 vy=rng.normal(0, 1, 500), inten=rng.uniform(1, 4, 500))
+    for size in (1, 7, 499, 2000):
+        picks, = handover.multi_frame_draws(kernels, members, [(0, 500)], size, recent, 12, SIGMAS,
+                                            [np.random.default_rng(size)])
+        s = sums(kernels, members, recent, 12)
+        w = np.exp(s - s.max())
+        u = np.random.default_rng(size).random()
+        want = np.minimum(np.searchsorted(np.cumsum(w / w.sum()), (u + np.arange(size)) / size), 499)
+        assert np.array_equal(picks, want)
 
 
 def test_the_draw_keeps_the_velocity_that_follows_the_target_at_snr_2():

@@ -15,10 +15,10 @@ N_tpf particles are then drawn ∝ exp(s_i) (systematic resampling).  With ``jit
 gets N(0, σ_v²) px/frame per axis, so the draw can choose among more velocities than the searching PF kept.
 Frame f itself is not summed again: the PP's particles were resampled on it in the searching PF's step.
 
-The sum is one kernel launch a frame for every PP handed over in it (``kernels/handover.py``, NumPy twin
-``numpy_kernels/handover.py``), over the frames kept in a ring (:class:`RecentFrames`).  The draw's randomness comes
-from a NumPy generator keyed on (seed, frame, HANDOVER_STREAM, draw), the draw counting the tracks begun at the
-frame from 1, so the tracker's other draws are the same as without it.
+The sums and the draws are one kernel launch a frame for every PP handed over in it (``kernels/handover.py``, NumPy
+twin ``numpy_kernels/handover.py``), over the frames kept in a ring (:class:`RecentFrames`).  The jitter and each
+draw's offset come from a NumPy generator keyed on (seed, frame, HANDOVER_STREAM, draw), the draw counting the tracks
+begun at the frame from 1, so the tracker's other draws are the same as without it.
 """
 from __future__ import annotations
 
@@ -64,46 +64,29 @@ class RecentFrames:
         return np.array([frame - g for g, _ in kept], np.float32), np.array([slot for _, slot in kept], np.int32)
 
 
-def retrodicted_log_ratio(kernels, state: dict, recent: RecentFrames, frame: int, sigmas) -> np.ndarray:
-    """s_i = Σ_j Eq. 15's log ratio of particle i at (x − j·vx, y − j·vy) with its intensity on z_{frame−j}, over
-    the frames ``recent`` holds before ``frame``, oldest first, in f64 (0 where it holds none).  ``state``: float32
-    arrays x, y, vx, vy, inten (px, px/frame, σ units); ``sigmas``: (Σ, σ); ``kernels``: the engine's
-    ``handover`` module."""
-    back, slots = recent.before(frame)
-    rows = np.stack([np.asarray(state[k], np.float32) for k in ("x", "y", "vx", "vy", "inten")])
-    out = np.zeros(rows.shape[1], np.float64)
-    if len(back) and rows.shape[1]:
-        constants = np.array(psf_constants(*sigmas), np.float32)
-        kernels.retrodicted_log_ratio(rows, recent.frames, back, slots, constants, recent.shape[0], out)
-    return out
-
-
 def multi_frame_draws(kernels, members: dict, pps: list, size: int, recent: RecentFrames, frame: int, sigmas,
                       rngs: list, jitter: float = 0.0) -> list:
-    """For each PP (start, n) of ``pps`` (``members[…][start:start + n]``), the indices (from start) of ``size``
-    particles drawn ∝ exp(s_i) (:func:`retrodicted_log_ratio` before ``frame``, one launch for all PPs) by
-    systematic resampling with its generator in ``rngs``; only E = 1 particles are drawn where the PP has any.
-    With ``jitter`` > 0 each PP's velocities first get N(0, jitter²) px/frame per axis from its generator, written
-    into ``members``."""
-    picked = []
+    """For each PP (start, n) of ``pps`` (``members[…][start:start + n]``), the indices (into ``members``) of
+    ``size`` particles drawn ∝ exp(s_i), s_i the retrodicted sum over the frames ``recent`` holds before ``frame``,
+    by systematic resampling with an offset from its generator in ``rngs``; only E = 1 particles are drawn where the
+    PP has any.  With ``jitter`` > 0 each PP's velocities first get N(0, jitter²) px/frame per axis from its
+    generator, written into ``members``.  The sums and the draws of all PPs are one launch of the engine's
+    ``multi_frame_draws``."""
+    if not len(pps):
+        return []
     for (start, n), rng in zip(pps, rngs):
-        part = slice(start, start + n)
         if jitter > 0:
             for name in ("vx", "vy"):
-                members[name][part] = members[name][part] + \
-                    np.float32(jitter) * rng.standard_normal(n).astype(np.float32)
-        e = members["e"][part] == 1
-        picked.append(start + np.flatnonzero(e if e.any() else np.ones(n, bool)))
-    every = np.concatenate(picked) if picked else np.zeros(0, np.int64)
-    scores = retrodicted_log_ratio(kernels, {k: members[k][every] for k in ("x", "y", "vx", "vy", "inten")}, recent,
-                                   frame, sigmas)
-    draws, first = [], 0
-    for (start, n), rng, pick in zip(pps, rngs, picked):
-        s = np.full(n, -np.inf)
-        s[pick - start] = scores[first:first + len(pick)]
-        first += len(pick)
-        w = np.exp(s - s.max())
-        cdf = np.cumsum(w / w.sum())
-        positions = (rng.random() + np.arange(size)) / size
-        draws.append(start + np.minimum(np.searchsorted(cdf, positions), n - 1))
-    return draws
+                part = members[name][start:start + n]
+                part[...] = part + np.float32(jitter) * rng.standard_normal(n).astype(np.float32)
+    state = np.stack([np.asarray(members[k], np.float32) for k in ("x", "y", "vx", "vy", "inten")]
+                     + [np.asarray(members["e"] == 1, np.float32)])
+    table = np.zeros((3, len(pps)), np.int32)
+    table[:2] = np.array(pps, np.int64).reshape(-1, 2).T
+    back, slots = recent.before(frame)
+    values = np.array([*psf_constants(*sigmas), recent.shape[0], size] + [rng.random() for rng in rngs], np.float64)
+    picks = np.empty(len(pps) * size, np.int32)
+    scores = np.zeros((2, state.shape[1]), np.float64)
+    kernels.multi_frame_draws(state, table, recent.frames, np.stack([back, slots.astype(np.float32)]), values,
+                              picks, scores)
+    return list(picks.reshape(len(pps), size))
