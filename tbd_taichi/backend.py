@@ -327,12 +327,7 @@ def from_host(target, array) -> None:
     if not _scalar_field(target):
         target.from_numpy(np.ascontiguousarray(array))
         return
-    from taichi.lang.util import to_numpy_type
-
-    array = np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype))
-    if array.shape != tuple(target.shape):
-        raise ValueError(f"array of shape {array.shape} does not fit a field of shape {tuple(target.shape)}")
-    _transfer_kernel("array_to_field", array.ndim)(array, target, serial_loops(array.size))
+    _copy_to_field(target, array, lambda a: a.shape == tuple(target.shape), "a field")
 
 
 def from_host_leading(target, array) -> None:
@@ -342,12 +337,19 @@ def from_host_leading(target, array) -> None:
     if isinstance(target, np.ndarray):
         target[:len(array)] = array
         return
+    _copy_to_field(target, array, lambda a: a.ndim == 1 and len(target.shape) == 1 and len(a) <= target.shape[0],
+                   "the start of a field")
+
+
+def _copy_to_field(target, array, fits, where: str) -> None:
+    """``array`` in the scalar field's dtype, checked by ``fits`` (else a ValueError naming ``where`` it does not
+    fit), copied by the typed kernel that loops over the array."""
     from taichi.lang.util import to_numpy_type
 
     array = np.ascontiguousarray(array, dtype=to_numpy_type(target.dtype))
-    if array.ndim != 1 or len(target.shape) != 1 or len(array) > target.shape[0]:
-        raise ValueError(f"array of shape {array.shape} does not fit the start of a field of shape {tuple(target.shape)}")
-    _transfer_kernel("array_to_field", 1)(array, target, serial_loops(array.size))
+    if not fits(array):
+        raise ValueError(f"array of shape {array.shape} does not fit {where} of shape {tuple(target.shape)}")
+    _transfer_kernel("array_to_field", array.ndim)(array, target, serial_loops(array.size))
 
 
 BATCH_DTYPES = ("f32", "f64", "i32", "u32")  # field dtypes a batch write holds exactly in f64
