@@ -30,7 +30,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from .loops import in_corner, light_ir, thread_span
+from .loops import FrameSize, in_corner, light_ir, thread_span
 from .particles.layout import first_above
 from .rng import NormalTables, SharedTables, key_prefix, normals_at, table_field, uniform_at
 
@@ -100,14 +100,15 @@ PIXEL_FIELDS = ("raw", "masked", "cells")  # the per-pixel fields ``put`` fills 
 
 
 @ti.data_oriented
-class PhdKernels:
-    """The pool's fields (``capacity`` slots, ``max_groups`` groups) and its steps.  The per-pixel fields (the
-    frames, the birth cells, Ψ) are one-dimensional, ``pixels`` entries (the frames' size class) holding a frame
-    row after row at its own width (cell y·W + x), and the kernels read the frame's (H, W) from ``frame_hw``, so
-    one compiled set serves every frame size up to ``pixels``."""
+class PhdKernels(FrameSize):
+    """The pool's fields (``capacity`` slots, ``max_groups`` groups) and its steps, for frames of ``shape``'s size
+    class.  The per-pixel fields (the frames, the birth cells, Ψ) are one-dimensional, ``pixels`` entries (the
+    class's) holding a frame row after row at its own width (cell y·W + x), and the kernels read the frame's (H, W)
+    from ``frame_hw`` (``FrameSize``), so one compiled set serves every frame size of the class."""
 
-    def __init__(self, capacity: int, max_groups: int, pixels: int, serial: bool = False):
-        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), int(pixels)
+    def __init__(self, capacity: int, max_groups: int, shape, serial: bool = False):
+        rows, columns = self.frame_size_field(shape)
+        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), rows * columns
         c, g = self.capacity, self.max_groups
         self.state = ti.field(ti.f32, (c, DIM))
         self.state2 = ti.field(ti.f32, (c, DIM))
@@ -129,7 +130,6 @@ class PhdKernels:
         # rows 0…MAX_MODELS−1: cumulative Π rows (Eq. 39); row BETA_ROW: cumulative β (Eq. 28)
         self.model_cdf = ti.field(ti.f32, (MAX_MODELS + 1, MAX_MODELS))
         self.birth = ti.field(ti.f32, BIRTH_WIDTH)  # (e, V_max, I_min, I_max, γ/J, I_floor): propagate's
-        self.frame_hw = ti.field(ti.i32, 2)  # the frame's (H, W), px: the kernels read it at run time
         self.tables, self.erf_table = NormalTables.shared(), ErfTable.shared()
         self.span = thread_span(serial)
 

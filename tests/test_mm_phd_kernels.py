@@ -8,7 +8,6 @@ import pytest
 from scipy import integrate, special, stats
 
 from tbd_taichi.kernels import phd as tk
-from tbd_taichi.kernels.loops import frame_class
 from tbd_taichi.motion_models import MODELS, model_set, process_noise, transition, turn_block
 from tbd_taichi.errors import ParameterError
 from tbd_taichi.methods.mm_phd.pool import check_support, model_cdf, padded
@@ -24,10 +23,8 @@ def make_pools(shape, capacity=3000, groups=4, models="cv,c-ct,ac-ct", T=1.0):
     n = len(ms["F"])
     switch = PI_EQ39 if n == 3 else np.full((n, n), 1.0 / n)
     beta = BETA if n == 3 else np.full(n, 1.0 / n)
-    pixels = int(np.prod(frame_class(shape)))
-    pools = (tk.PhdKernels(capacity, groups, pixels), nk.PhdKernels(capacity, groups, pixels))
+    pools = (tk.PhdKernels(capacity, groups, shape), nk.PhdKernels(capacity, groups, shape))
     for k in pools:
-        k.put("frame_hw", np.array(shape, np.int32))
         for name in ("F", "F_inv", "L"):
             k.put(name, padded(ms[name]))
         k.put("model_cdf", model_cdf(switch, beta))

@@ -10,7 +10,7 @@ from ..kernels.phd import (BETA_ROW, BIRTH_WIDTH, CX, CY, DIM, ERF_END, ERF_STEP
                            PIXEL_FIELDS, RATIO_CAP, SHIFT_MAX,
                            QSCALE, S_CELL, S_I, S_MODEL, S_NOISE, S_RESAMPLE, S_SWITCH, S_VX, S_VY, S_X, S_Y,
                            SQRT_HALF, START, TOP, TOTAL)
-from ..kernels.loops import in_corner
+from ..kernels.loops import frame_class, in_corner
 from .rng import normal, uniform
 
 F32 = np.float32
@@ -36,8 +36,9 @@ def pixel_fraction(centre, pos, scale) -> np.ndarray:
 class PhdKernels:
     """The pool of ``kernels.phd.PhdKernels`` as arrays, with the same steps."""
 
-    def __init__(self, capacity: int, max_groups: int, pixels: int, serial: bool = False):
-        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), int(pixels)
+    def __init__(self, capacity: int, max_groups: int, shape, serial: bool = False):
+        rows, columns = frame_class(shape)
+        self.capacity, self.max_groups, self.pixels = int(capacity), int(max_groups), rows * columns
         c, g = self.capacity, self.max_groups
         self.state, self.state2 = np.zeros((c, DIM), F32), np.zeros((c, DIM), F32)
         self.model, self.model2, self.group, self.group2 = (np.zeros(c, np.int32) for _ in range(4))
@@ -50,7 +51,7 @@ class PhdKernels:
         self.F, self.F_inv, self.L = (np.zeros((MAX_MODELS, DIM, DIM), F32) for _ in range(3))
         self.model_cdf = np.zeros((MAX_MODELS + 1, MAX_MODELS), F32)
         self.birth = np.zeros(BIRTH_WIDTH, F32)
-        self.frame_hw = np.zeros(2, np.int32)
+        self.frame_hw = np.array([int(shape[0]), int(shape[1])], np.int32)
 
     @property
     def shape(self) -> tuple[int, int]:

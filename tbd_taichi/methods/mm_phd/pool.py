@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from ... import backend
-from ...engines import kernel_module
+from ...engines import frame_kernels
 from ...errors import ParameterError
-from ...kernels.loops import frame_class
-from ...launch import Launcher
 from ...kernels.phd import (CX, CY, F_SUPPORT, FRAME, GROUP_FLOAT, GROUP_INT, L_SUPPORT, LENGTH, NO_CENTRE,
                              OUT_ID, OUT_LEN, N_HAT, OUT_START, OUT_WEIGHT, QSCALE, RADIUS, START, TOP)
 from ...motion_models import DIM, model_set
@@ -53,16 +51,12 @@ class PhdPool:
 
     def __init__(self, shape, p: MMPHDParams, d: Derived, capacity: int, max_groups: int, seed: int,
                  engine: str, arch: str | None):
-        module = kernel_module(engine, "phd", arch)
-        rows, columns = frame_class(shape)
-        dims = (int(capacity), int(max_groups), rows * columns)
+        self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(int(v) for v in shape)
         # the per-pixel fields hold the pixels of the frames' size class and the kernels read the frame's (H, W)
         # from frame_hw, so frames of a class share the compiled kernels; Taichi compiles a data-oriented object's
-        # kernels once per object: a new pool takes the fields of a finished one of the class (backend.reusable)
-        self.k = module.PhdKernels(*dims) if engine == "numpy" else \
-            Launcher(backend.reusable(self, ("phd",) + dims, lambda: module.PhdKernels(*dims)))
-        self.p, self.d, self.seed, self.shape = p, d, int(seed), tuple(int(v) for v in shape)
-        self.k.put("frame_hw", np.array(self.shape, np.int32))
+        # kernels once per object: a new pool takes the fields of a finished one of the class (frame_kernels)
+        self.k = frame_kernels(self, engine, "phd", "PhdKernels", (int(capacity), int(max_groups), self.shape),
+                               self.shape, arch)
         self.max_groups = max_groups
         ms = model_set(d.models, p.frame_interval, p.omega, p.q_s, p.q_i)
         check_support(ms)
