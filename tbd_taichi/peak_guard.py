@@ -5,7 +5,6 @@ under the real-video profile a confirmed track is reported only while the runnin
 its estimate is at least ``min_peak_z`` (docs/input-and-background.md).  Not in any of the papers."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -13,20 +12,23 @@ PEAK_RHO = 0.1  # a track's running peak z: exponential mean from 0, this weight
 SETTLE_FRAMES = 10  # 1/PEAK_RHO: frames after which the running mean holds 65 % of a steady peak (1 − 0.9¹⁰)
 
 
-def nearest_pixel(x: float, y: float) -> tuple[int, int]:
-    """The pixel (column, row) whose centre is nearest to (x, y) (centres at integers)."""
-    return int(math.floor(x + 0.5)), int(math.floor(y + 0.5))
+def peak_z(z: np.ndarray, x, y):
+    """The largest z in the 3×3 pixels around (x, y), the window cut at the image's border (σ units; NaN where
+    the window lies outside the image); ``x``, ``y``: one position (a float comes back) or arrays of them."""
+    cx, cy = (np.floor(np.asarray(v, np.float64) + 0.5).astype(np.int64) for v in (x, y))
+    h, w = z.shape
+    side = np.arange(-1, 2)
+    rows = np.clip(cy[..., None] + side, 0, h - 1)  # a cut window's rows and columns repeat its border ones
+    columns = np.clip(cx[..., None] + side, 0, w - 1)
+    cells = (rows[..., :, None] * w + columns[..., None, :]).reshape(cx.shape + (9,))
+    value = z.ravel()[cells].max(axis=-1).astype(np.float64)
+    value = np.where((-1 <= cx) & (cx <= w) & (-1 <= cy) & (cy <= h), value, np.nan)
+    return value if value.ndim else float(value)
 
 
-def peak_z(z: np.ndarray, x: float, y: float) -> float:
-    """The largest z in the 3×3 pixels around (x, y) (σ units; NaN outside the image)."""
-    cx, cy = nearest_pixel(x, y)
-    window = z[max(cy - 1, 0):max(cy + 2, 0), max(cx - 1, 0):max(cx + 2, 0)]
-    return float(window.max()) if window.size else float("nan")
-
-
-def running_peak_z(previous: float, z: np.ndarray, x: float, y: float) -> float:
+def running_peak_z(previous, z: np.ndarray, x, y):
     """The running peak z after frame ``z`` with the track at (x, y): previous + ρ·(peak − previous), ρ =
-    PEAK_RHO (σ units; unchanged where the 3×3 window is outside the image)."""
+    PEAK_RHO (σ units; unchanged where the 3×3 window is outside the image); one track or arrays of them."""
     value = peak_z(z, x, y)
-    return previous + PEAK_RHO * (value - previous) if math.isfinite(value) else previous
+    out = np.where(np.isfinite(value), previous + PEAK_RHO * (value - previous), previous)
+    return out if out.ndim else float(out)

@@ -55,14 +55,31 @@ def test_log_weight_ratio_and_its_fallbacks():
 def test_windowed_icef_lifts_only_a_full_window_of_ratios_above_the_mean():
     window, ratio = 4, 0.05
     low = math.log(0.04)  # r = 0.04 < 0.1: Eq. 40 gives 0.9 for this frame alone
-    full_above = deque([math.log(0.2), low, low, math.log(0.06)], maxlen=window)  # geometric mean 0.069
-    full_below = deque([low] * window, maxlen=window)
-    assert windowed_icef(0.9, full_above, window, ratio) == 1.0
-    assert windowed_icef(0.9, full_below, window, ratio) == 0.9
-    assert windowed_icef(0.9, deque([math.log(0.2)] * 3), window, ratio) == 0.9  # window not yet full
-    assert windowed_icef(0.9, full_above, 1, ratio) == 0.9  # window 1: Eq. 40 as printed
-    assert windowed_icef(3.0, full_below, window, ratio) == 3.0  # r ≥ 1 and 0.1 ≤ r < 1 keep Eq. 40's value
-    assert windowed_icef(1.0, full_below, window, ratio) == 1.0
+    above, below = [math.log(0.2), low, low, math.log(0.06)], [low] * window  # geometric means 0.069, 0.04
+    sums, full = np.array([sum(above), sum(below), 3 * math.log(0.2)]), np.array([True, True, False])
+    nine = np.full(3, 0.9)
+    assert windowed_icef(nine, sums, full, window, ratio).tolist() == [1.0, 0.9, 0.9]  # the last: not yet full
+    assert windowed_icef(nine, sums, full, 1, ratio).tolist() == [0.9] * 3  # window 1: Eq. 40 as printed
+    # r ≥ 1 and 0.1 ≤ r < 1 keep Eq. 40's value
+    assert windowed_icef(np.array([3.0, 1.0]), sums[[1, 1]], full[:2], window, ratio).tolist() == [3.0, 1.0]
+
+
+def track_states_run(log_r, compact, icef_window, confirm_window, t_rt, c0=1.0):
+    """One track's C, N_rt and confirmation frame through ``TrackStates.step`` (ln MSW 0, so ln MTW = ln r; SCEF
+    1.1 where ``compact``, else 0.9; T_ft 0, so it never ends; ICEF's 0.1 and the windows' ratios as at 200×200)."""
+    from tbd_taichi.methods.sgds.track_states import TrackStates
+
+    states, confirmed_at = TrackStates(1, icef_window, confirm_window), None
+    states.start(0, 0, 5.0, 5.0)
+    states.confidence[0] = c0
+    rule = ((10, 10), 0.0, t_rt, 0.1, 0.05, math.log(0.03))
+    for f, (lr, tight) in enumerate(zip(log_r, compact)):
+        ended = states.step(f, np.array([True]), np.array([[5.0, 5.0]]), np.array([lr]), 0.0,
+                            np.array([1.1 if tight else 0.9]), rule)
+        assert not ended[0]
+        if confirmed_at is None and states.confirmed[0]:
+            confirmed_at = f
+    return float(states.confidence[0]), int(states.n_rt[0]), confirmed_at
 
 
 def test_windowed_icef_lets_a_faint_compact_track_reach_c_equal_1():
@@ -72,24 +89,18 @@ def test_windowed_icef_lets_a_faint_compact_track_reach_c_equal_1():
     rng = np.random.default_rng(0)
     log_r = np.log(rng.uniform(0.04, 0.08, 40))
     for window, expect_confirmed in ((1, False), (10, True)):
-        c, n_rt, recent = 1.0, 0, deque(maxlen=window)
-        for lr in log_r:
-            recent.append(lr)
-            c = update_confidence(c, windowed_icef(icef(lr, 0.0), recent, window, 0.05), 1.1)
-            n_rt += c == 1.0
-        assert (n_rt > 5) == expect_confirmed, (window, n_rt, c)
+        c, n_rt, confirmed_at = track_states_run(log_r, [True] * 40, window, 0, t_rt=5)
+        assert (n_rt > 5) == expect_confirmed == (confirmed_at is not None), (window, n_rt, c)
 
 
 def test_held_compact_needs_a_full_window_of_compact_frames_above_the_mean():
     window, floor = 5, math.log(0.03)
-    above = [(math.log(r), True) for r in (0.02, 0.05, 0.03, 0.04, 0.03)]  # geometric mean 0.033
-    assert held_compact(deque(above, maxlen=window), window, floor)
-    assert not held_compact(deque(above[:4], maxlen=window), window, floor)  # window not yet full
-    spread = above[:2] + [(above[2][0], False)] + above[3:]  # one frame with SCEF < 1
-    assert not held_compact(deque(spread, maxlen=window), window, floor)
-    below = [(math.log(0.025), True)] * window
-    assert not held_compact(deque(below, maxlen=window), window, floor)
-    assert not held_compact(deque(above, maxlen=1), 0, floor)  # window 0: Eq. 43's N_rt alone
+    above = [math.log(r) for r in (0.02, 0.05, 0.03, 0.04, 0.03)]  # geometric mean 0.033
+    cases = np.array([[True, True], [True, False], [False, True], [True, True]])  # compact, full
+    sums = np.array([sum(above), sum(above[:4]), sum(above), window * math.log(0.025)])
+    # full and above; not yet full; one frame with SCEF < 1; below the mean
+    assert held_compact(cases[:, 0], sums, cases[:, 1], window, floor).tolist() == [True, False, False, False]
+    assert held_compact(cases[:1, 0], sums[:1], cases[:1, 1], 0, floor).tolist() == [False]  # window 0: N_rt alone
 
 
 def test_long_window_confirms_a_faint_compact_track_that_c_never_does():
@@ -100,15 +111,8 @@ def test_long_window_confirms_a_faint_compact_track_that_c_never_does():
     rng = np.random.default_rng(1)
     log_r = np.log(rng.uniform(0.028, 0.045, 100))
     for spread_every, expect_frame in ((0, 29), (20, None)):
-        c, n_rt, recent, held, confirmed_at = 0.5, 0, deque(maxlen=10), deque(maxlen=30), None
-        for f, lr in enumerate(log_r):
-            compact = not spread_every or f % spread_every != spread_every - 1
-            recent.append(lr)
-            c = update_confidence(c, windowed_icef(icef(lr, 0.0), recent, 10, 0.05), 1.1 if compact else 0.9)
-            n_rt += c == 1.0
-            held.append((lr, compact))
-            if confirmed_at is None and held_compact(held, 30, math.log(0.03)):
-                confirmed_at = f
+        compact = [not spread_every or f % spread_every != spread_every - 1 for f in range(100)]
+        _, n_rt, confirmed_at = track_states_run(log_r, compact, 10, 30, t_rt=10 ** 6, c0=0.5)
         assert n_rt == 0 and confirmed_at == expect_frame, (spread_every, n_rt, confirmed_at)
 
 
@@ -539,7 +543,9 @@ def test_keep_peak_z_holds_a_proven_track_through_a_faint_stretch():
             z = np.zeros((20, 20), np.float32)
             z[10, 10] = peak
             t.path.append((f, 10.0, 10.0, 0, 0, 1, 1))
-            out.append(tracker._reportable(t, z))
+            tracker.states.xy[0] = (10.0, 10.0)
+            tracker._update_peak_z(np.array([0]), z)
+            out.append(tracker._reportable(t))
         return out
 
     bright, faint, dark = [20.0] * 30, [13.0] * 15, [5.0] * 10
@@ -575,7 +581,9 @@ def test_still_frames_keeps_a_still_track_that_goes_early_out_of_the_whole_paths
             z = np.zeros((40, 40), np.float32)
             z[10, int(round(x))] = 20.0
             t.path.append((f, x, 10.0, speed, 0, 1, 1))
-            online.append(tracker._reportable(t, z))
+            tracker.states.xy[1] = (x, 10.0)
+            tracker._update_peak_z(np.array([1]), z)
+            online.append(tracker._reportable(t))
             whole.append(t.whole)
         tracker.active.append(t)  # the whole paths hold its rows from its first reported frame, or none
         rows = tracker.whole_paths()
@@ -624,6 +632,8 @@ def test_merge_duplicates_ends_the_younger_of_close_tracks():
     places = {1: (5.0, 5.0), 2: (6.9, 5.0), 3: (20.0, 5.0), 4: (20.0, 7.0), 5: (5.0, 20.0), 6: (6.5, 20.0),
               7: (8.0, 20.0)}
     tracker.active = [Track(k, k, path=deque([(0, x, y, 0.0, 0.0, 1.0, 1.0)])) for k, (x, y) in places.items()]
+    for k, (x, y) in places.items():
+        tracker.states.start(k, 0, x, y)
     tracker.free_groups, tracker.ended_groups = [], []
     tracker._merge_duplicates()
     assert [t.track_id for t in tracker.active] == [1, 3, 4, 5, 7]

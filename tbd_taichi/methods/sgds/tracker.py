@@ -43,18 +43,18 @@ from ...kernels.particles.layout import STATE
 from ...kernels.loops import block_class
 from ...kernels.populations import pixel_class
 from ...particles import ParticlePool
-from ...peak_guard import nearest_pixel, running_peak_z
+from ...peak_guard import running_peak_z
 from ...tables import TRACK_DTYPE, make_table
 from ..still_tracks import StillTrackRule
 from .backfill import backfilled_paths
-from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, LOST_FRAMES, TRACK_MASK_HALF, Track, held_compact,
-                           icef_of_log_ratio, log_weight_ratio, msw_from_candidates, near_any, near_any_of, scef,
-                           update_confidence, windowed_icef, within_duplicate_radius)
+from .confirmation import (DUPLICATE_RADIUS, ICEF_LOWER, TRACK_MASK_HALF, Track, msw_from_candidates, near_any,
+                           near_any_of, scef, within_duplicate_radius)
 from ..registry import OneSequence
 from .params import SGDSParams
 from .handover import HANDOVER_STREAM, RecentFrames, engine_kernels, multi_frame_draws
 from .populations import resize_population
 from .searching_pool import SearchingPool
+from .track_states import TrackStates
 
 MIN_FRAMES = 5
 PIPELINE_STAGES = ("normalise", "saliency", "searching", "tracking")  # SGDSPF.stage_seconds
@@ -116,7 +116,9 @@ class SGDSPF(OneSequence):
         self.next_pp = 1
         self.free_groups = list(range(max_tracks))[::-1]
         self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
-        self.active: list[Track] = []
+        self.active: list[Track] = []  # in track-id order
+        self.states = TrackStates(max_tracks, p.icef_window, p.confirm_window)  # their per-frame numbers, by group
+        self.younger = np.triu(np.ones((max_tracks, max_tracks), bool), 1)  # [i, j]: track j came after track i
         self.finished: list[Track] = []
         self.still_rule = StillTrackRule(self.p.still_frames, self.p.still_radius)  # which tracks the whole paths take
         self.recent = RecentFrames(self.p.handover_frames, self.shape)  # the frames the multi-frame hand-over sums over
@@ -221,11 +223,23 @@ class SGDSPF(OneSequence):
 
     def _suppress_tracked(self, proposal: np.ndarray) -> None:
         """Zero the proposal in the ±TRACK_MASK_HALF px square around each active track (one target, one track),
-        in place: ``proposal`` is the front frame's own copy, used for this frame's search only."""
-        r = TRACK_MASK_HALF
-        for t in self.active:
-            cx, cy = nearest_pixel(*t.last_xy())
-            proposal[max(cy - r, 0):cy + r + 1, max(cx - r, 0):cx + r + 1] = 0
+        in place: ``proposal`` is the front frame's own copy, used for this frame's search only.  The squares' rows
+        and columns are clipped to the image (an active track's nearest pixel lies inside it)."""
+        if not self.active:
+            return
+        centres = np.floor(self._tracked_xy() + 0.5).astype(np.int64)
+        side = np.arange(-TRACK_MASK_HALF, TRACK_MASK_HALF + 1)
+        rows = np.clip(centres[:, 1, None] + side, 0, self.shape[0] - 1)
+        columns = np.clip(centres[:, 0, None] + side, 0, self.shape[1] - 1)
+        proposal[rows[:, :, None], columns[:, None, :]] = 0
+
+    def _active_groups(self) -> np.ndarray:
+        """The active tracks' groups, in track order."""
+        return np.fromiter((t.group for t in self.active), np.int64, len(self.active))
+
+    def _tracked_xy(self) -> np.ndarray:
+        """(n, 2): the active tracks' last positions (x, y), in track order."""
+        return self.states.xy[self._active_groups()]
 
     def _proposal_maps(self, proposal: np.ndarray, support: np.ndarray) -> dict:
         """Each block's proposal pixels (y·W + x, ascending) and their OPsal_N weights (f64), for the
@@ -273,7 +287,7 @@ class SGDSPF(OneSequence):
         """ln MSW for Eq. 40 (``msw_reference``), after the searching PFs' step."""
         if self.p.msw_reference == "search":
             return float(self.search.max_log_weights().max())
-        return msw_from_candidates(front.best_lef, self.shape[1], [t.last_xy() for t in self.active])
+        return msw_from_candidates(front.best_lef, self.shape[1], self._tracked_xy())
 
     def _eliminate_and_hand_over(self, f: int, n_pp: int) -> None:
         """Eq. 37 elimination, Eq. 38 PP states, potential targets, and the index image P_pp, over the ``n_pp``
@@ -287,7 +301,7 @@ class SGDSPF(OneSequence):
         come to the host, PP after PP, each in state order."""
         p, pool = self.p, self.search
         rng = np.random.default_rng([self.seed, f])
-        tracked = [t.last_xy() for t in self.active]
+        tracked = self._tracked_xy().tolist()
         members, sizes = pool.eliminate_and_hand_over_numbered(rng.random(n_pp), self.pp_index, p.T_PTp, p.T_PE,
                                                                tracked, DUPLICATE_RADIUS, len(self.free_groups))
         self._start_tracks(f, members, sizes, rng, tracked)
@@ -311,11 +325,10 @@ class SGDSPF(OneSequence):
                 continue
             chosen.append((starts[k], sizes[k], rng.random(max(n_tpf, sizes[k]))))
             groups.append(self.free_groups.pop())
-            track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1),
-                          log_ratios=deque(maxlen=self.p.icef_window),
-                          held=deque(maxlen=max(self.p.confirm_window, 1)))
+            track = Track(self.next_track_id, groups[-1], path=deque(maxlen=None if self.history else 1))
             self.next_track_id += 1
             track.path.append((f, x, y, float(mean["vx"][k]), float(mean["vy"][k]), float(mean["inten"][k]), 1.0))
+            self.states.start(track.group, f, x, y)
             self.active.append(track)
             tracked.append((x, y))
         emptied, self.ended_groups = self.ended_groups, []
@@ -351,72 +364,72 @@ class SGDSPF(OneSequence):
 
     def _confirm_tracks(self, f: int, z: np.ndarray, est, log_msw: float) -> list[tuple]:
         """Algorithm 2 after the tracking PFs' step on frame f (estimates ``est``): paths (Eq. 39), confidences
-        (Eqs. 40–43), confirmation and ends; returns the rows of the tracks reported at f."""
-        p = self.p
+        (Eqs. 40–43), confirmation and ends, for all groups at once (``TrackStates.step``); then the ended
+        tracks end and the confirmed ones are reported, in track order; returns the rows of the tracks reported at f."""
+        p, states = self.p, self.states
         if not self.active:
             return []
-        log_mtw = est.max_logw.tolist()
-        finite = np.isfinite(est.x).tolist()
-        states = np.stack([est.x, est.y, est.vx, est.vy, est.intensity], axis=1).tolist()
-        scefs = scef(est.cov_e, p.T_devr).tolist()  # Eq. 41 over E = 1 particles (module notes); all groups at once
-        rows = []
-        h, w = self.shape
-        for t in list(self.active):
-            g = t.group
-            t.frames_without_e = t.frames_without_e + 1 if not finite[g] else 0
-            log_r = log_weight_ratio(log_mtw[g], log_msw)
-            t.log_ratios.append(log_r)
-            intensity_cef = windowed_icef(icef_of_log_ratio(log_r, self.icef_lower), t.log_ratios, p.icef_window,
-                                          self.icef_ratio)
-            t.confidence = update_confidence(t.confidence, intensity_cef, scefs[g])
-            if finite[g]:  # Eq. 39
-                t.path.append((f, *states[g], t.confidence))
-            x, y = t.last_xy()
-            lost = t.frames_without_e >= LOST_FRAMES or not (-0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5)
-            if t.confidence < p.T_ft or lost:
+        finite = np.isfinite(est.x)
+        scefs = scef(est.cov_e, p.T_devr)  # Eq. 41 over E = 1 particles (module notes)
+        ended = states.step(f, finite, np.stack([est.x, est.y], axis=1), est.max_logw, log_msw, scefs,
+                            (self.shape, p.T_ft, p.T_rt, self.icef_lower, self.icef_ratio, self.confirm_log_ratio))
+        g = self._active_groups()
+        moved = g[finite[g]]
+        rows = np.stack([est.x[moved], est.y[moved], est.vx[moved], est.vy[moved], est.intensity[moved],
+                         states.confidence[moved]], axis=1).tolist()
+        tracks = list(self.active)  # _end_track removes from self.active
+        for t, row in zip((t for t in tracks if finite[t.group]), rows):  # Eq. 39: the moved tracks' paths
+            t.path.append((f, *row))
+        if p.min_peak_z > 0:
+            self._update_peak_z(g, z)
+        out = []
+        for i in np.flatnonzero(ended[g] | states.confirmed[g]).tolist():  # the events, in track order
+            t = tracks[i]
+            if ended[t.group]:
                 self._end_track(t)
                 continue
-            if t.confidence == 1.0:
-                t.n_rt += 1
-                if t.n_rt > p.T_rt:
-                    t.confirmed = True
-            t.held.append((log_r, scefs[g] > 1.0))
-            if not t.confirmed and held_compact(t.held, p.confirm_window, self.confirm_log_ratio):
-                t.confirmed = True
-            if self._reportable(t, z) and t.path[-1][0] == f:
-                rows.append((f, t.track_id) + tuple(t.path[-1][1:]))
+            t.confirmed = True
+            if self._reportable(t) and states.last_frame[t.group] == f:
+                out.append((f, t.track_id) + tuple(t.path[-1][1:]))
         self._merge_duplicates()
-        return rows
+        return out
 
-    def _reportable(self, t: Track, z: np.ndarray) -> bool:
-        """Confirmed, and (with min_peak_z > 0) its running peak z at least min_peak_z: a real-video
-        guard against confirmed clutter, which is fainter in z than the targets (docs/results/drone_ir.md).
-        The running mean starts at 0, so a track must stay bright for about ten frames; short-lived
-        transients are not reported.  A track reported in ``keep_after`` frames needs only ``keep_peak_z``
-        (with keep_peak_z > 0): hysteresis, so that a proven target is not cut where it fades for a while."""
+    def _update_peak_z(self, groups: np.ndarray, z: np.ndarray) -> None:
+        """The running peak z (``running_peak_z``) of the tracks in ``groups`` at their last positions, after
+        frame ``z``."""
+        s = self.states
+        s.peak_z[groups] = running_peak_z(s.peak_z[groups], z, s.xy[groups, 0], s.xy[groups, 1])
+
+    def _reportable(self, t: Track) -> bool:
+        """The confirmed track ``t`` is reported at this frame: always without the guard; with min_peak_z > 0 while
+        its running peak z (``TrackStates.peak_z``) is at least min_peak_z: a real-video guard against confirmed
+        clutter, which is fainter in z than the targets (docs/results/drone_ir.md).  The running mean starts at 0,
+        so a track must stay bright for about ten frames; short-lived transients are not reported.  A track
+        reported in ``keep_after`` frames needs only ``keep_peak_z`` (with keep_peak_z > 0): hysteresis, so that a
+        proven target is not cut where it fades for a while."""
         if self.p.min_peak_z <= 0:
-            t.reported = t.whole = t.reported or t.confirmed
-            return t.confirmed
-        t.peak_z = running_peak_z(t.peak_z, z, *t.last_xy())
+            t.reported = t.whole = True
+            return True
         proven = t.reported and t.reported_frames >= self.p.keep_after and self.p.keep_peak_z > 0
         keep = self.p.keep_peak_z if proven else self.p.min_peak_z
-        ok = t.confirmed and t.peak_z >= keep
+        ok = self.states.peak_z[t.group] >= keep
         t.reported = t.reported or ok
         if ok:
             t.reported_frames += 1
             frame = t.path[-1][0]
             t.reported_span = (t.reported_span or (frame,))[:1] + (frame,)
             self.still_rule.reported(t, t.last_xy())
-        return ok
+        return bool(ok)
 
     def _merge_duplicates(self) -> None:
         """Of two active tracks closer than DUPLICATE_RADIUS, the younger (larger id) ends; oldest first,
         and a track that has ended ends no other."""
         if len(self.active) < 2:
             return
-        tracks = sorted(self.active, key=lambda t: t.track_id)
-        x, y = np.array([t.last_xy() for t in tracks]).T
-        close = np.triu(within_duplicate_radius(x, y, x, y), 1)
+        tracks = list(self.active)  # in track-id order; _end_track removes from self.active
+        x, y = self._tracked_xy().T
+        close = within_duplicate_radius(x, y, x, y)
+        close &= self.younger[:len(x), :len(x)]  # pairs (older, younger)
         if not close.any():
             return
         alive = np.ones(len(tracks), bool)
