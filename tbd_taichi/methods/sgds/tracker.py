@@ -118,7 +118,6 @@ class SGDSPF(OneSequence):
         self.ended_groups: list[int] = []  # groups of tracks ended this frame: free at once, emptied by _start_tracks
         self.active: list[Track] = []  # in track-id order
         self.states = TrackStates(max_tracks, p.icef_window, p.confirm_window)  # their per-frame numbers, by group
-        self.younger = np.triu(np.ones((max_tracks, max_tracks), bool), 1)  # [i, j]: track j came after track i
         self.finished: list[Track] = []
         self.still_rule = StillTrackRule(self.p.still_frames, self.p.still_radius)  # which tracks the whole paths take
         self.recent = RecentFrames(self.p.handover_frames, self.shape)  # the frames the multi-frame hand-over sums over
@@ -428,8 +427,7 @@ class SGDSPF(OneSequence):
             return
         tracks = list(self.active)  # in track-id order; _end_track removes from self.active
         x, y = self._tracked_xy().T
-        close = within_duplicate_radius(x, y, x, y)
-        close &= self.younger[:len(x), :len(x)]  # pairs (older, younger)
+        close = np.triu(within_duplicate_radius(x, y, x, y), 1)  # pairs (older, younger)
         if not close.any():
             return
         alive = np.ones(len(tracks), bool)
