@@ -3,7 +3,7 @@
 On a GPU every NumPy array passed to a kernel is copied to the device before the launch and back after it, so the
 bytes of NumPy arrays in kernel arguments per frame are the per-frame device↔host traffic (field transfers go
 through `backend.to_host` / `from_host`, whose kernels take NumPy arrays too).  On the CPU these arrays are used
-in place; the count is the same.  Runs a method on its bench scene (`tbd-taichi bench`'s, 256 × 320 unless
+in place; the count is the same.  Runs a method on its bench scene and settings (`tbd-taichi bench`'s, 256 × 320 unless
 ``--shape``) and prints, per kernel, the launches and KiB of NumPy arguments per frame after a warm-up, and the
 frame's own size for comparison.
 
@@ -15,9 +15,8 @@ from collections import defaultdict
 import numpy as np
 from taichi.lang import kernel_impl
 
-from tbd_taichi import backend, launch, methods
-from tbd_taichi.bench import WARMUP
-from tbd_taichi.simulate import simulate
+from tbd_taichi import backend, launch
+from tbd_taichi.bench import WARMUP, bench_sequence, pipeline_stepper
 
 
 class Tally:
@@ -29,10 +28,10 @@ class Tally:
 
     def add(self, name: str, args) -> None:
         if self.on and not self.inside:
-            arrays = [(i, a.shape, a.dtype.name) for i, a in enumerate(args) if isinstance(a, np.ndarray)]
+            arrays = [(i, a) for i, a in enumerate(args) if isinstance(a, np.ndarray)]
             self.launches[name] += 1
-            self.bytes[name] += sum(a.nbytes for a in args if isinstance(a, np.ndarray))
-            self.arrays[name] = arrays
+            self.bytes[name] += sum(a.nbytes for _, a in arrays)
+            self.arrays[name] = [(i, a.shape, a.dtype.name) for i, a in arrays]
 
 
 def counted(tally: Tally) -> None:
@@ -63,16 +62,16 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=40, help="counted frames (default 40)")
     args = parser.parse_args()
     backend.init("cpu")
-    tally, spec, shape = Tally(), methods.get(args.method), tuple(args.shape)
+    tally, shape = Tally(), tuple(args.shape)
     counted(tally)
-    scene = simulate(shape, frames=args.frames + WARMUP + 10, seed=0,
-                     **{"snr": args.snr, "motion": "transit", **spec.bench_scene})
-    tracker = methods.make_tracker(args.method, shape, engine="taichi", **spec.bench_keywords(args.snr))
-    for frame in scene.frames[:WARMUP + 10]:
-        tracker.update(frame)
+    frames = bench_sequence(args.method, shape, args.frames + WARMUP + 10, args.snr)
+    step, close = pipeline_stepper(shape, args.snr, "taichi", method=args.method)
+    for frame in frames[:WARMUP + 10]:
+        step(frame)
     tally.on = True
-    for frame in scene.frames[WARMUP + 10:]:
-        tracker.update(frame)
+    for frame in frames[WARMUP + 10:]:
+        step(frame)
+    close()
     n, frame_kib = args.frames, shape[0] * shape[1] * 4 / 1024
     print(f"{args.method}, {shape[0]} × {shape[1]}, SNR preset {args.snr}: NumPy arrays handed to kernels per frame "
           f"(one f32 frame is {frame_kib:.0f} KiB)")

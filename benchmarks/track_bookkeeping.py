@@ -13,9 +13,8 @@ import functools
 import time
 
 from tbd_taichi import backend, methods
-from tbd_taichi.bench import WARMUP, machine_description
+from tbd_taichi.bench import WARMUP, bench_sequence, machine_description
 from tbd_taichi.methods.sgds.tracker import SGDSPF
-from tbd_taichi.simulate import simulate
 
 TIMED = ("_confirm_tracks", "_suppress_tracked", "_log_msw")
 
@@ -45,14 +44,13 @@ def main() -> None:
     if args.engine == "taichi":
         backend.init("cpu")
     spec, seconds = methods.get("sgds"), {}
-    scene = simulate((256, 320), frames=args.frames + WARMUP + 10, seed=0,
-                     **{"snr": 1.2, "motion": "transit", **spec.bench_scene})
+    frames = bench_sequence("sgds", (256, 320), args.frames + WARMUP + 10, 1.2)
     tracker = methods.make_tracker("sgds", (256, 320), engine=args.engine, history=False,
                                    **{**spec.bench_keywords(1.2), "max_tracks": args.max_tracks})
-    for frame in scene.frames[:WARMUP + 10]:
+    for frame in frames[:WARMUP + 10]:
         tracker.update(frame)
     timed_methods(seconds)
-    for frame in scene.frames[WARMUP + 10:]:
+    for frame in frames[WARMUP + 10:]:
         tracker.update(frame)
     per_frame = {name: seconds.get(name, 0.0) / args.frames * 1e3 for name in TIMED}
     print(f"{machine_description()}; engine {args.engine}; {args.max_tracks} tracking PFs, "

@@ -213,6 +213,18 @@ def peak_rss_mib() -> float:
     return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, KiB on Linux
 
 
+def bench_sequence(method: str, shape, n_frames: int, snr: float, seed: int = 0) -> np.ndarray:
+    """The ``n_frames`` frames the bench times ``method`` on: its ``bench_frames`` if it has them, else a simulated
+    transit at ``snr`` with its ``bench_scene``."""
+    from . import methods
+
+    spec = methods.get(method)
+    if spec.bench_frames:
+        return spec.bench_frames(tuple(shape), n_frames, seed)
+    return simulate(tuple(shape), frames=n_frames, seed=seed,
+                    **{"snr": snr, "motion": "transit", **spec.bench_scene}).frames
+
+
 def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "numpy"), arch: str = "cpu",
               seed: int = 0, particles: int = 0, groups: int = 1, pipeline: bool = True,
               frontend_process: bool = False, runs: int = 1, paired: bool = False, method: str = "sgds",
@@ -232,12 +244,10 @@ def run_bench(shape, snr: float = 1.4, n_frames: int = 20, engines=("taichi", "n
         raise ParameterError(f"runs must be ≥ 1, got {runs}")
     from . import methods
 
-    spec = methods.get(method)  # an unknown method fails here
-    scene = {"snr": snr, "motion": "transit", **spec.bench_scene}
+    methods.get(method)  # an unknown method fails here
     backend.keep_freed_memory()
     cfg = backend.init(arch, threads=threads)
-    frames = spec.bench_frames(tuple(shape), n_frames + WARMUP, seed) if spec.bench_frames else \
-        simulate(tuple(shape), frames=n_frames + WARMUP, seed=seed, **scene).frames
+    frames = bench_sequence(method, shape, n_frames + WARMUP, snr, seed)
     result = {"method": method, "shape": [int(shape[0]), int(shape[1])], "snr": snr, "frames": n_frames, "arch": cfg.arch,
               "threads": backend.cpu_threads() if cfg.arch == "cpu" else None,
               "particles": particles, "groups": groups, "pipeline": pipeline,
