@@ -96,12 +96,16 @@ def false_tracks(tracks: np.ndarray, truth: np.ndarray, gate: float = T0) -> int
     return count
 
 
-def ospa(estimates, truths, c: float = OSPA_C, p: float = OSPA_P) -> float:
-    """OSPA distance between two point sets (n, 2) and (m, 2), cut-off c px, order p."""
+def _ospa_sets(estimates, truths) -> tuple[np.ndarray, np.ndarray]:
+    """The two point sets as (k, 2) float arrays, the smaller first (OSPA is symmetric)."""
     a = np.asarray(estimates, float).reshape(-1, 2)
     b = np.asarray(truths, float).reshape(-1, 2)
-    if len(a) > len(b):
-        a, b = b, a
+    return (b, a) if len(a) > len(b) else (a, b)
+
+
+def ospa(estimates, truths, c: float = OSPA_C, p: float = OSPA_P) -> float:
+    """OSPA distance between two point sets (n, 2) and (m, 2), cut-off c px, order p."""
+    a, b = _ospa_sets(estimates, truths)
     m, n = len(a), len(b)
     if n == 0:
         return 0.0
@@ -116,10 +120,7 @@ def ospa(estimates, truths, c: float = OSPA_C, p: float = OSPA_P) -> float:
 
 def ospa_brute_force(estimates, truths, c: float = OSPA_C, p: float = OSPA_P) -> float:
     """OSPA by enumerating every assignment (small sets only; the reference for tests)."""
-    a = np.asarray(estimates, float).reshape(-1, 2)
-    b = np.asarray(truths, float).reshape(-1, 2)
-    if len(a) > len(b):
-        a, b = b, a
+    a, b = _ospa_sets(estimates, truths)
     m, n = len(a), len(b)
     if n == 0:
         return 0.0
