@@ -33,14 +33,19 @@ class OneLineParser(argparse.ArgumentParser):
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--arch", default="cpu", choices=backend.ARCH_NAMES, help=ARCH_HELP)
-    parser.add_argument("--threads", type=number(whole, 1), default=None,
+    parser.add_argument("--threads", type=number(whole, 1, validate.MAX_THREADS), default=None,
                         help="CPU threads for Taichi (default: all cores, each worker pinned to one; fewer: unpinned)")
 
 
 def check_evaluate(args) -> tuple[np.ndarray, tuple[str, np.ndarray]]:
     """Both files read and checked: (tracks, (truth kind, truth))."""
     tracks = tables.read_tracks(validate.input_file("--tracks", args.tracks))
-    return tracks, tables.read_any_truth(validate.input_file("--truth", args.truth))
+    kind, truth = tables.read_any_truth(validate.input_file("--truth", args.truth))
+    last = max(int(t["frame"].max()) for t in (tracks, truth) if len(t)) if len(tracks) or len(truth) else -1
+    if args.frames is not None and args.frames <= last:
+        raise TBDError(f"--frames {args.frames}: the files have rows up to frame {last} (0-based); give at least "
+                       f"{last + 1}, or leave it out")
+    return tracks, (kind, truth)
 
 
 def cmd_evaluate(args) -> int:
@@ -78,7 +83,7 @@ def check_bench(args) -> list[str]:
     params, _ = methods.checked_settings(spec, shape, keywords)
     frames_as_particles = shape[0] * shape[1] * args.frames * 4 // validate.PARTICLE_BYTES  # the simulated frames
     validate.tracker_memory(f"bench --shape {shape[0]} {shape[1]} ({len(engines)} engine(s))", shape,
-                            lambda: spec.particles(shape, params) * len(engines)
+                            lambda: spec.slots(shape, params) * len(engines)
                             + args.particles + frames_as_particles)
     return engines
 
@@ -133,6 +138,11 @@ def check_evaluate_suite(args) -> dict:
     if args.scheduler is not None and args.scenario != "jia2022":
         raise TBDError(f"--scheduler applies to --scenario jia2022; the {args.scenario} scenario runs in this process")
     scheduler = check_scheduler(args.scheduler)
+    given = [f for f, v in (("--snrs", args.snrs), ("--size", args.size), ("--tracker-snr", args.tracker_snr))
+             if v is not None]
+    if given and args.scenario != "jia2022":
+        raise TBDError(f"{given[0]} applies to --scenario jia2022; the {args.scenario} scenario sets its own")
+    args.size = args.size or "all"
     snrs = _float_list(args.snrs, "--snrs") if args.snrs else (suite.QUICK["snrs"] if args.quick else suite.SNRS)
     sizes = tuple(s for s in suite.SIZES if args.size in ("all", str(s[0])))
     if args.tests is not None:
@@ -143,6 +153,9 @@ def check_evaluate_suite(args) -> dict:
         tests = GULER_QUICK["runs"] if args.quick else RUNS
     else:
         tests = suite.QUICK["tests"] if args.quick else 100
+    if args.seed + tests - 1 > validate.MAX_SEED:
+        raise TBDError(f"--seed {args.seed} with {tests} tests: the runs' seeds SEED…SEED+{tests - 1} must stay "
+                       f"≤ {validate.MAX_SEED}")
     out_dir = Path(args.out_dir or ("docs/results/guler2016" if args.scenario == "guler2016" else "suite-results"))
     if out_dir.exists() and not out_dir.is_dir():
         raise TBDError(f"--out-dir {out_dir}: is a file; give a folder")
@@ -304,9 +317,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--truth", required=True, help="truth CSV: points (frame,target_id,x,y,...) or boxes "
                     "(frame,x,y,w,h[,target_id]; x, y = the top-left corner)")
     ev.add_argument("--t0", type=number(positive, 0.0, True), default=metrics.T0, help="DSR distance threshold T0, px (default 2)")
-    ev.add_argument("--ospa-c", type=number(positive), default=metrics.OSPA_C, help="OSPA cut-off c, px (default 5)")
-    ev.add_argument("--ospa-p", type=number(positive, 1.0, True), default=metrics.OSPA_P, help="OSPA order p ≥ 1 (default 2)")
-    ev.add_argument("--frames", type=number(whole, 1), default=None,
+    ev.add_argument("--ospa-c", type=number(validate.within, 1e-3, 1e6), default=metrics.OSPA_C,
+                    help="OSPA cut-off c, px, in [0.001, 1e6] (default 5)")
+    ev.add_argument("--ospa-p", type=number(validate.within, 1.0, 20.0), default=metrics.OSPA_P,
+                    help="OSPA order p in [1, 20] (default 2)")
+    ev.add_argument("--frames", type=number(whole, 1, tables.MAX_FRAME + 1), default=None,
                     help="sequence length for the OSPA and cardinality-error averages (default: last frame in "
                          "either file + 1)")
     ev.add_argument("--json", action="store_true", help="print one JSON object (point truth: keys dsr, edt_mean, "
@@ -345,11 +360,11 @@ def build_parser() -> argparse.ArgumentParser:
     es.add_argument("--quick", action="store_true", help="a small version: SNR 1.4 and 2.0, 2 tests per condition; "
                     "guler2016: S1 Motion 1 delta 30 and one value per sweep, 2 runs")
     es.add_argument("--snrs", default=None, help="comma list of SNRs (default 1.2,1.4,1.6,1.8,2.0)")
-    es.add_argument("--size", choices=("all", "50", "200"), default="all",
+    es.add_argument("--size", choices=("all", "50", "200"), default=None,
                     help="50 (50x50, 70 frames), 200 (200x200, 150 frames) or all (default)")
     es.add_argument("--methods", default=",".join(suite_defaults()),
                     help=f"comma list of methods, of {','.join(methods.names())} (default {','.join(suite_defaults())})")
-    es.add_argument("--seed", type=number(whole, 0), default=0, help="test k simulates scenario seed SEED+k (default 0)")
+    es.add_argument("--seed", type=number(whole, 0, validate.MAX_SEED), default=0, help="test k simulates scenario seed SEED+k (default 0)")
     es.add_argument("--tracker-snr", type=number(positive), default=None,
                     help="give every tracker this snr preset (default: the condition's SNR, as in the paper)")
     es.add_argument("--workers", type=number(whole, 1), default=None,
@@ -415,4 +430,7 @@ def main(argv=None) -> int:
         return args.func(args)
     except TBDError as exc:
         print(f"tbd-taichi {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file the checks passed that the system then refused (full disk, a vanished folder)
+        print(f"tbd-taichi {args.command}: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2

@@ -33,7 +33,7 @@ def add_batch_parser(sub, common) -> None:
     bt.add_argument("--profile", choices=PROFILES, default="auto",
                     help="settings profile per input, as track's (default auto: real-video for videos, image "
                          "folders and integer arrays, paper for float arrays)")
-    bt.add_argument("--seed", type=number(whole, 0), default=0, help="random seed of every run (default 0)")
+    bt.add_argument("--seed", type=number(whole, 0, validate.MAX_SEED), default=0, help="random seed of every run (default 0)")
     bt.add_argument("--engine", choices=("taichi", "numpy"), default="taichi", help="kernel engine (default taichi)")
     bt.add_argument("--video", action="store_true", help="also write each input's overlay video, <name>.mp4")
     bt.add_argument("--plot", action="store_true", help="also write each input's track picture, <name>.png")

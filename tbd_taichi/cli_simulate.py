@@ -24,13 +24,13 @@ def check_simulate(args) -> None:
     files."""
     from .simulate import check_memory
 
-    own = {"jia2022": ("--shape", "--frames", "--snr", "--motion"), "long2012": ("--case", "--snr-db"),
+    own = {"jia2022": ("--shape", "--frames", "--snr", "--motion", "--targets"), "long2012": ("--case", "--snr-db"),
            "bruno2008": ("--ptcr", "--exit-reentry", "--frames"), "huo2022": ("--sequence", "--frames"),
            "guler2016": ("--wall", "--motion", "--delta", "--frames", "--wall-seed")}
     given = {"--shape": args.shape, "--frames": args.frames, "--snr": args.snr, "--case": args.case,
              "--snr-db": args.snr_db, "--ptcr": args.ptcr, "--exit-reentry": args.exit_reentry or None,
              "--sequence": args.sequence, "--motion": args.motion, "--wall": args.wall, "--delta": args.delta,
-             "--wall-seed": args.wall_seed}
+             "--wall-seed": args.wall_seed, "--targets": args.targets}
     for flag, value in given.items():
         if value is not None and flag not in own[args.scenario]:
             owners = " or ".join(s for s, flags in own.items() if flag in flags)
@@ -105,7 +105,7 @@ def cmd_simulate(args) -> int:
                 f"Δ {p['delta']:g} over the frame mean, uint16; "
                 f"σ {p['sigma']:.2f}, SNR Δ/σ {p['snr']:.2f}, the thesis's Δ/(100σ) {p['snr_thesis']:.4f}")
     else:
-        scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets,
+        scene = simulate((args.shape[0], args.shape[1]), frames=args.frames, snr=args.snr, targets=args.targets or 1,
                          seed=args.seed, motion=args.motion or "stay")
         what = f"SNR {args.snr}"
     out = Path(args.out)
@@ -163,7 +163,8 @@ def add_simulate_parser(sub, common) -> None:
                           "(default 200); guler2016: 4-5000 (default 134)")
     sim.add_argument("--snr", type=number(positive), default=None,
                      help="jia2022: target SNR of Eq. 1: centre-pixel signal / noise std")
-    sim.add_argument("--targets", type=number(whole, 1), default=1, help="number of targets (≥ 1, default 1)")
+    sim.add_argument("--targets", type=number(whole, 1), default=None,
+                     help="jia2022: number of targets (≥ 1, default 1); the other scenarios fix theirs")
     sim.add_argument("--seed", type=number(whole, 0), default=0,
                      help="random seed, a whole number ≥ 0 (default 0); guler2016: the drift and the noise only "
                           "(the wall is --wall-seed's)")

@@ -51,7 +51,7 @@ def add_track_parser(sub, common) -> None:
                          "height (px, 0-based, pixel centres at integers)")
     tr.add_argument("--snr", type=number(validate.positive), default=None,
                     help="the lowest target SNR to detect (default 1.4; 5 under the real-video profile)")
-    tr.add_argument("--seed", type=number(whole, 0), default=0,
+    tr.add_argument("--seed", type=number(whole, 0, validate.MAX_SEED), default=0,
                     help="random seed, a whole number ≥ 0; the same seed gives the same file (default 0)")
     tr.add_argument("--engine", choices=("taichi", "numpy"), default="taichi", help="kernel engine (default taichi)")
     tr.add_argument("--particles", type=number(whole, 1), default=None,
@@ -74,8 +74,8 @@ def add_track_parser(sub, common) -> None:
     tr.add_argument("--box-margin", type=number(validate.positive, 0.0, True), default=metrics.BOX_MARGIN,
                     help="with box truth: a hit is a track point inside the box grown by this, px (default 2)")
     tr.add_argument("--video", default=None, help="write the input with each track's box, id and trail, and the --truth boxes or points in green (.mp4 or .avi)")
-    tr.add_argument("--fps", type=number(validate.positive), default=None,
-                    help="the overlay video's frame rate (default: the input video's, else 15)")
+    tr.add_argument("--fps", type=number(validate.within, 0.01, 1000), default=None,
+                    help="the overlay video's frame rate, in [0.01, 1000] (default: the input video's, else 15)")
     tr.add_argument("--plot", default=None,
                     help="picture of the tracks over the max-projection, with the truth if given (.png, .pdf or .svg)")
     tr.add_argument("--background", choices=BACKGROUNDS, default=None,
@@ -214,15 +214,15 @@ def plan_track(args) -> TrackPlan | None:
                "plot": validate.output_path("--plot", args.plot, validate.PLOT_OUT) if args.plot else None,
                "diagnostics": validate.output_path("--diagnostics", args.diagnostics, (".csv",))
                if args.diagnostics else None}
-    for name, path in outputs.items():
-        if path is not None and path.resolve() == out.resolve():
-            raise TBDError(f"--{name} {path} is the --out file too; give two paths")
+    validate.apart_from_inputs({"--out": out, **{f"--{k}": v for k, v in outputs.items()}},
+                               {"INPUT": args.input, "--truth": args.truth}, io.IMAGE_SUFFIXES)
     truth = tables.read_any_truth(validate.input_file("--truth", args.truth)) if args.truth else None
     source = io.open_frames(args.input)
     validate.frame_shape(f"{source.name}: frame size", source.shape)
     io.check_length(source, spec.min_frames)
-    if Path(args.input).resolve() == out.resolve():
-        raise TBDError(f"--out {out} is the input; give another path")
+    if truth is not None and len(truth[1]) and not tables.rows_inside(*truth, source.shape):
+        raise TBDError(f"--truth {args.truth}: none of its {len(truth[1])} rows lies inside the input's "
+                       f"{source.shape[0]}x{source.shape[1]} (HxW) frames; is it the truth of another sequence?")
     profile, why = resolved_profile(requested_profile(args), source.kind, source.dtype)
     check_real_video_needs(spec, profile, flagged)
     settings = {**profile_settings(spec, profile), **flagged}

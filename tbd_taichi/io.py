@@ -17,7 +17,9 @@ from __future__ import annotations
 import os
 import queue
 import re
+import struct
 import threading
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -30,6 +32,7 @@ from .errors import InputError
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg", ".webm")
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp")
 ARRAY_SUFFIXES = (".npy", ".npz")
+F32_MAX = float(np.finfo(np.float32).max)
 SUPPORTED = "a .npy or .npz file (array 'frames'), a video (" + ", ".join(VIDEO_SUFFIXES) + \
     ") or a folder of " + "/".join(s.lstrip(".").upper() for s in IMAGE_SUFFIXES) + " images"
 
@@ -126,16 +129,26 @@ def _check_finite(array: np.ndarray, name: str, chunk: int = 64) -> None:
     whole-array temporary)."""
     if array.dtype.kind != "f":
         return
+    wide = array.dtype.itemsize > 4  # float64 frames become float32: values past its range would become inf
     for start in range(0, len(array), chunk):
-        finite = np.isfinite(array[start:start + chunk]).all(axis=(1, 2))
+        part = array[start:start + chunk]
+        finite = np.isfinite(part).all(axis=(1, 2))
+        if wide:
+            finite &= (np.abs(np.where(np.isfinite(part), part, 0)) <= F32_MAX).all(axis=(1, 2))
         if not finite.all():
             index = start + int(np.argmin(finite))
-            raise InputError(f"{name}: frame {index} contains {'NaN' if np.isnan(array[index]).any() else 'inf'}")
+            frame = array[index]
+            what = "NaN" if np.isnan(frame).any() else "inf" if np.isinf(frame).any() else \
+                f"values beyond float32's range (±{F32_MAX:.3g})"
+            raise InputError(f"{name}: frame {index} contains {what}")
 
 
 def _load_array(path: Path) -> np.ndarray:
     try:
         if path.suffix.lower() == ".npy":
+            with open(path, "rb") as handle:
+                if handle.read(6) != b"\x93NUMPY":
+                    raise InputError(f"{path}: not a readable .npy file (no NumPy header)")
             return np.load(path, mmap_mode="r", allow_pickle=False)
         with np.load(path, allow_pickle=False) as archive:
             if "frames" not in archive.files:
@@ -143,8 +156,8 @@ def _load_array(path: Path) -> np.ndarray:
             return archive["frames"]
     except InputError:
         raise
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(f"{path}: not a readable {path.suffix} file ({exc})") from exc
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a readable {path.suffix} file ({exc})") from None
 
 
 def _video_source(path: Path) -> FrameSource:
@@ -179,6 +192,41 @@ def _read_image(path: Path) -> np.ndarray:
     return to_grey(image, str(path))
 
 
+def header_size(path: Path) -> tuple[int, int] | None:
+    """(H, W) of a PNG or BMP image from its header (its first 26 bytes), None for other types; a file whose
+    header does not match its .png or .bmp name is an InputError.  Lets a folder's sizes be checked before the run
+    without decoding every image."""
+    suffix = path.suffix.lower()
+    if suffix not in (".png", ".bmp"):
+        return None
+    try:
+        with open(path, "rb") as handle:
+            head = handle.read(26)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be read ({exc.strerror})") from None
+    if suffix == ".png" and head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and len(head) >= 24:
+        width, height = struct.unpack(">II", head[16:24])
+        return int(height), int(width)
+    if suffix == ".bmp" and head[:2] == b"BM" and len(head) >= 26:
+        width, height = struct.unpack("<ii", head[18:26])
+        return abs(int(height)), int(width)
+    raise InputError(f"{path}: unreadable image (not a {suffix.lstrip('.').upper()} file)")
+
+
+def _check_folder_sizes(files: list, shape: tuple) -> None:
+    """Every PNG and BMP of ``files`` as large as the first image (``shape``), from their headers."""
+    for index, file in enumerate(files):
+        size = header_size(file)
+        if size is not None and size != tuple(shape[:2]):
+            raise mixed_sizes(file, index, size, shape, files[0])
+
+
+def mixed_sizes(file: Path, index: int, size, shape, first: Path) -> InputError:
+    """The error for image ``index`` of a folder whose (H, W) ``size`` differs from the first image's."""
+    return InputError(f"{file}: image {index} has size {size[0]}x{size[1]} (HxW); expected {shape[0]}x{shape[1]} "
+                      f"like {first.name}; images of mixed sizes")
+
+
 def _folder_source(path: Path) -> FrameSource:
     files = sorted((p for p in path.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
                    key=lambda p: natural_key(p.name))
@@ -186,13 +234,13 @@ def _folder_source(path: Path) -> FrameSource:
         raise InputError(f"{path}: folder holds no {'/'.join(IMAGE_SUFFIXES)} images")
     first = _read_image(files[0])
     shape = first.shape
+    _check_folder_sizes(files, shape)
 
     def frames() -> Iterator[np.ndarray]:
         for index, file in enumerate(files):
             image = _read_image(file)
             if image.shape != shape:
-                raise InputError(f"{file}: image {index} has size {image.shape[0]}x{image.shape[1]} (HxW); "
-                                 f"expected {shape[0]}x{shape[1]} like {files[0].name}; images of mixed sizes")
+                raise mixed_sizes(file, index, image.shape, shape, files[0])
             yield image
 
     return FrameSource(str(path), shape, len(files), frames, kind="folder", dtype=first.dtype)

@@ -137,8 +137,9 @@ def mean_ospa(tracks: np.ndarray, truth: np.ndarray, c: float = OSPA_C, p: float
         n_frames = max(list(est) + list(tru), default=-1) + 1
     if n_frames == 0:
         return 0.0
-    empty = np.zeros((0, 2))
-    return float(np.mean([ospa(est.get(f, empty), tru.get(f, empty), c, p) for f in range(n_frames)]))
+    empty = np.zeros((0, 2))  # a frame with neither set scores 0: only the frames with rows need the sum
+    seen = sorted(f for f in set(est) | set(tru) if 0 <= f < n_frames)
+    return float(sum(ospa(est.get(f, empty), tru.get(f, empty), c, p) for f in seen) / n_frames)
 
 
 def thesis_errors(tracks: np.ndarray, truth: np.ndarray, gate: float = MATCH_GATE) -> dict:

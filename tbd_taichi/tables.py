@@ -24,6 +24,8 @@ TRUTH_COLUMNS = ("frame", "target_id", "x", "y", "vx", "vy", "intensity")
 BOX_SIZE_COLUMNS = ("w", "h")  # a box tracker's tracks carry these after TRACK_COLUMNS: box size, px
 BOX_COLUMNS = ("frame", "x", "y", "w", "h")  # labelled target boxes (drone-ir): corner x = column, y = row
 INTEGER_COLUMNS = ("frame", "track_id", "target_id", "model", "aspect")  # int64 in a table, written without decimals
+MAX_FRAME = 10**7 - 1  # the largest frame index a table may hold (ten million frames: days of video)
+MAX_ID = 2**53  # the largest |id| a table may hold (whole numbers are exact in a CSV's float up to here)
 
 
 def _dtype(columns: tuple[str, ...]) -> np.dtype:
@@ -129,8 +131,24 @@ def read_csv(path, columns: tuple[str, ...], optional: tuple[str, ...] = ()) -> 
                 raise InputError(f"{path}: line {line} has a value that is not a number") from None
             if not all(np.isfinite(v) for v in values.values()):
                 raise InputError(f"{path}: line {line} has a NaN or infinite value")
+            _check_whole_columns(values, path, line)
             rows.append(tuple(values.get(c, 0.0) for c in columns + optional))
     return make_table(rows, _dtype(columns + optional))
+
+
+def _check_whole_columns(values: dict, path, line: int) -> None:
+    """A row's frame a whole number in [0, MAX_FRAME], its ids and indices whole numbers with |v| ≤ MAX_ID, and a
+    box's w and h > 0; else an InputError naming the line."""
+    for column in INTEGER_COLUMNS:
+        v = values.get(column)
+        if v is None:
+            continue
+        high, low = (MAX_FRAME, 0) if column == "frame" else (MAX_ID, -MAX_ID)
+        if not (float(v).is_integer() and low <= v <= high):
+            raise InputError(f"{path}: line {line}: {column} {v:g} must be a whole number in [{low}, {high:g}]")
+    for column in BOX_SIZE_COLUMNS:
+        if column in values and values[column] <= 0:
+            raise InputError(f"{path}: line {line}: box {column} {values[column]:g} must be > 0 px")
 
 
 def read_tracks(path) -> np.ndarray:
@@ -163,3 +181,16 @@ def read_any_truth(path) -> tuple[str, np.ndarray]:
         raise InputError(f"{path}: truth needs the columns frame,target_id,x,y (points) or frame,x,y,w,h (boxes); "
                          f"it has {','.join(sorted(header)) or 'no header'}")
     return "points", read_truth(path)
+
+
+def rows_inside(kind: str, table: np.ndarray, shape) -> int:
+    """How many rows of a truth ``table`` (``kind`` "points" or "boxes", as :func:`read_any_truth` gives) lie in
+    frames of ``shape`` (H, W): a point within the pixels' extent [−0.5, W − 0.5) × [−0.5, H − 0.5), a box
+    (corner x, y, size w, h) overlapping it."""
+    h, w = shape
+    if kind == "boxes":
+        inside = (table["x"] + table["w"] > -0.5) & (table["x"] < w - 0.5) & \
+            (table["y"] + table["h"] > -0.5) & (table["y"] < h - 0.5)
+    else:
+        inside = (table["x"] >= -0.5) & (table["x"] < w - 0.5) & (table["y"] >= -0.5) & (table["y"] < h - 0.5)
+    return int(np.count_nonzero(inside))

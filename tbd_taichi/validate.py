@@ -18,6 +18,8 @@ from .errors import InputError, ParameterError
 VIDEO_OUT = (".mp4", ".avi")
 PLOT_OUT = (".png", ".pdf", ".svg")
 MIN_SIDE = 8  # the smallest frame side a tracker or the simulator takes, px
+MAX_SEED = 2**32 - 1  # the trackers' counter-based generator keys on a 32-bit seed: a larger one would repeat a smaller
+MAX_THREADS = max(8, 4 * (os.cpu_count() or 1))  # CPU threads a run may ask for (more only oversubscribe the cores)
 
 
 def whole(name: str, value, low: int = 0, high: int | None = None) -> int:
@@ -38,6 +40,15 @@ def positive(name: str, value, low: float = 0.0, closed: bool = False) -> float:
     return float(value)
 
 
+def within(name: str, value, low: float, high: float) -> float:
+    """``value`` as a finite float in [low, high]."""
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and \
+        math.isfinite(value) and low <= value <= high
+    if not ok:
+        raise ParameterError(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}".lstrip())
+    return float(value)
+
+
 def output_path(name: str, path, suffixes: tuple[str, ...] | None = None) -> Path:
     """An output file path whose folder exists and is writable, with one of ``suffixes`` (any if None); the
     file itself, if there, must be a writable file."""
@@ -51,12 +62,37 @@ def output_path(name: str, path, suffixes: tuple[str, ...] | None = None) -> Pat
         raise InputError(f"{name} {path}: is a folder; give a file name")
     if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
         raise InputError(f"{name} {path}: not writable")
+    created = not path.exists()
+    try:  # os.access answers for the permission bits only (root, /proc, a read-only mount): open it, write nothing
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        raise InputError(f"{name} {path}: cannot be written ({exc.strerror})") from None
+    if created:
+        path.unlink(missing_ok=True)
     return path
+
+
+def apart_from_inputs(outputs: dict, inputs: dict, frame_suffixes: tuple = ()) -> None:
+    """Refuse outputs ({flag: path or None}) that would overwrite an input ({name: path or None}: a file, or a
+    folder whose ``frame_suffixes`` files are read as frames) or each other."""
+    seen = {}
+    for flag, path in ((f, Path(p).resolve()) for f, p in outputs.items() if p is not None):
+        if path in seen:
+            raise InputError(f"{flag} {path} is the {seen[path]} file too; give two paths")
+        seen[path] = flag
+        for name, source in ((n, Path(i).resolve()) for n, i in inputs.items() if i is not None):
+            if path == source:
+                raise InputError(f"{flag} {path} is the {name} file; writing it would overwrite the input")
+            if source.is_dir() and path.parent == source and path.suffix.lower() in frame_suffixes:
+                raise InputError(f"{flag} {path} lies in the {name} folder with its frames; give a path outside it")
 
 
 def input_file(name: str, path) -> Path:
     """An existing, readable, non-empty file."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{name} {path}: is a folder; give a file")
     if not path.is_file():
         raise InputError(f"{name} {path}: no such file")
     if not os.access(path, os.R_OK):

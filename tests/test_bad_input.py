@@ -159,7 +159,7 @@ CLI_CASES = [
     ("track-truth-nan", TRACK + ["--truth", "{d}/nan_truth.csv"], "line 3"),
     ("track-truth-short-row", TRACK + ["--truth", "{d}/short_row.csv"], "line 3"),
     ("track-truth-no-columns", TRACK + ["--truth", "{d}/no_xy.csv"], "no_xy.csv"),
-    ("track-truth-is-folder", TRACK + ["--truth", "{d}"], "no such file"),
+    ("track-truth-is-folder", TRACK + ["--truth", "{d}"], "is a folder"),
     # track --method mm-phd: its parameters and inputs (issue 37)
     ("mmphd-input-nan", ["track", "{d}/nan.npy", "--method", "mm-phd", "--out", "{d}/out.csv"], "frame 7"),
     ("mmphd-input-inf", ["track", "{d}/inf.npy", "--method", "mm-phd", "--out", "{d}/out.csv"], "frame 7"),

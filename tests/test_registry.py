@@ -44,8 +44,8 @@ def test_make_tracker_gives_a_tracker(name):
     (dict(name="sgds", N_sump=8000.5), r"N_sump = 8000.5 must be an integer ≥ 10"),
     (dict(name="sgds", msw_reference="x"), r"msw_reference = 'x' must be one of candidates, search"),
     (dict(name="pf", systematic="yes"), r"systematic = 'yes' must be a bool"),
-    (dict(name="sgds", seed=-1), r"seed must be a whole number ≥ 0, got -1"),
-    (dict(name="sgds", seed=1.5), r"seed must be a whole number ≥ 0, got 1.5"),
+    (dict(name="sgds", seed=-1), r"seed must be a whole number in \[0, 4294967295\], got -1"),
+    (dict(name="sgds", seed=1.5), r"seed must be a whole number in \[0, 4294967295\], got 1.5"),
     (dict(name="sgds", engine="cupy"), r"engine must be one of taichi, numpy"),
     (dict(name="sgds", init_box=(1, 2, 3, 4)), r"method sgds takes no --init-box"),
 ])

@@ -92,7 +92,7 @@ def checked_settings(spec: MethodSpec, shape: tuple[int, int], settings: dict) -
     overrides, options = split_options(spec, settings)
     params = spec.make_params(shape, **overrides)
     tracker_memory(f"a {spec.name} tracker for {shape[0]}x{shape[1]} frames", shape,
-                   lambda: spec.particles(shape, params))
+                   lambda: spec.slots(shape, params))
     return params, options
 
 
@@ -130,11 +130,11 @@ def make_tracker(name: str, shape, *, seed: int = 0, engine: str = "taichi", arc
     integer-typed frames, decided at the first frame), ``paper`` or ``real-video``; ``kw`` wins over it.  An
     unknown name, parameter or out-of-range value is a ParameterError."""
     from ..profiles import check_profile, check_real_video_needs, profile_settings
-    from ..validate import whole
+    from ..validate import MAX_SEED, whole
     from .profiled import ProfiledTracker
 
     spec = get(name)
-    seed = whole("seed", seed, 0)
+    seed = whole("seed", seed, 0, MAX_SEED)
     check_engine(engine)
     check_profile(profile)
     if len(tuple(shape)) != 2:

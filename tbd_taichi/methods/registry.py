@@ -66,6 +66,9 @@ class OneSequence:
         self._finished = True
 
 
+MAGNITUDE = 1e9  # a real (float) parameter whose range has an open end must still lie within ±this (1e300 is a typo)
+
+
 @dataclass(frozen=True)
 class Range:
     """The valid values of a parameter: an interval (ends open or closed, either may be absent), optionally
@@ -152,6 +155,10 @@ def validate_params(params, label: str):
             continue
         ok = _of_type(value, info.type) and info.range.contains(value) if info.type in (int, float) else \
             (_of_type(value, info.type) and (not info.range.choices or value in info.range.choices))
+        if ok and info.type is float and abs(value) > MAGNITUDE and not info.range.choices and \
+                (info.range.high is None or info.range.low is None):
+            raise ParameterError(f"{label} parameter {info.name} = {value!r} is past any sensible value "
+                                 f"(|value| ≤ {MAGNITUDE:g} for a real parameter with an open end)")
         if not ok:
             rng = dataclasses.replace(info.range, integer=True) if info.type is int else info.range
             rule = str(rng) if info.type in (int, float) or rng.choices else f"a {info.type.__name__}"
@@ -244,6 +251,7 @@ class MethodSpec:
     assumes: str = ""
     rank: int = 100  # listing order (tables, --help): the flagship first
     particle_count: Callable | None = None  # (shape, params) -> particles the tracker is configured with
+    slot_count: Callable | None = None  # (shape, params) -> particle slots it allocates (default: particle_count)
     extra_columns: Callable | None = None  # params -> columns its tracks rows carry after TRACK_COLUMNS
     bench_settings: Callable | None = None  # snr -> make_tracker keywords the bench uses (None: {"snr": snr})
     bench_scene: Mapping = field(default_factory=dict)  # the bench's simulate() keywords (targets, snr, motion)
@@ -271,6 +279,10 @@ class MethodSpec:
     def particles(self, shape, params) -> int:
         """The particles a tracker of ``params`` for frames of ``shape`` is configured with (0 if it does not say)."""
         return self.particle_count(shape, params) if self.particle_count else 0
+
+    def slots(self, shape, params) -> int:
+        """The particle slots a tracker of ``params`` allocates (its memory), ≥ :meth:`particles`."""
+        return self.slot_count(shape, params) if self.slot_count else self.particles(shape, params)
 
     def parse_assignments(self, assignments) -> dict:
         """``["KEY=VALUE", ...]`` (``--param``) as {name: value} of the declared types; an unknown key or

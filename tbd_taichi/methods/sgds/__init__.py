@@ -28,6 +28,11 @@ def sgds_particles(shape, params: SGDSParams) -> int:
     return params.N_sump * block_grid(shape, params.L_ib).n_blocks
 
 
+def sgds_slots(shape, params: SGDSParams) -> int:
+    """The slots both pools allocate: the searching particles and N_tpf for each of the max_tracks tracking PFs."""
+    return sgds_particles(shape, params) + params.N_tpf * params.max_tracks
+
+
 SPEC = MethodSpec(
     name="sgds", title="SGDS-PF",
     paper="Jia et al., Sensors 2022",
@@ -38,7 +43,7 @@ SPEC = MethodSpec(
     min_frames=MIN_FRAMES,
     options=("background", "bad_pixels", "history", "frontend_process"),
     aliases={"snr": "snr", "min_peak_z": "min_peak_z"},
-    rank=0, particle_count=sgds_particles,
+    rank=0, particle_count=sgds_particles, slot_count=sgds_slots,
     real_video={"keep_peak_z": REAL_VIDEO_KEEP_PEAK_Z, "keep_after": REAL_VIDEO_KEEP_AFTER,
                 "still_frames": REAL_VIDEO_STILL_FRAMES},
     assumes=("point targets, any number (Gaussian PSF, Σ = 0.7 px), nearly constant velocity ≤ 1 px/frame; peak "

@@ -104,13 +104,13 @@ class SGDSParams:
                                    unit="px/frame", source="not in the paper", low=0)
     icef_window: int = param(10, doc="ICEF = 1 also when MTW/MSW's geometric mean over this many frames is ≥ "
                              "icef_mean_ratio (1: Eq. 40 as printed)", unit="frames", source="not in the paper",
-                             low=1)
+                             low=1, high=1000)
     icef_mean_ratio: float = param(0.05, doc="the ICEF window's threshold at 200×200 (scaled to the frame area)",
                                    source="not in the paper", low=0, high=1, low_closed=False)
     icef_area_exponent: float = param(0.45, doc="exponent of the ICEF thresholds' area scaling",
                                       source="not in the paper", low=0)
     confirm_window: int = param(30, doc="confirm a track whose cloud was compact this many frames (0: off)",
-                                unit="frames", source="not in the paper", low=0)
+                                unit="frames", source="not in the paper", low=0, high=1000)
     confirm_mean_ratio: float = param(0.03, doc="the long window's MTW/MSW threshold at 200×200",
                                       source="not in the paper", low=0, high=1, low_closed=False)
     lef_memory: float = param(0.9, doc="memory of the multi-frame LEF (0: Eq. 29 as printed)",
