@@ -122,6 +122,18 @@ def plan_item(path: Path, name: str, out_dir: Path, track_options: list[str], ex
     return BatchItem(str(path), name, tuple(argv), tuple(outputs))
 
 
+def check_outputs_apart(items: list, paths: list, out_dir: Path) -> None:
+    """No item's final output is one of the inputs (a clip in ``out_dir`` with --video would be replaced by its
+    own overlay), and no input folder of frames is ``out_dir`` (the pictures would join its frames)."""
+    inputs = {Path(p).resolve() for p in paths}
+    if out_dir.resolve() in inputs:
+        raise TBDError(f"--out-dir {out_dir} is an input folder of frames; give another folder")
+    for item in items:
+        for _, final in item.outputs:
+            if Path(final).resolve() in inputs:
+                raise TBDError(f"--out-dir {out_dir}: {final} would overwrite that input; give another folder")
+
+
 def remove_stale_partials(out_dir: Path) -> int:
     """Delete the temporary outputs that killed or terminated runs left in ``out_dir``; how many."""
     stale = [p for p in out_dir.glob(f".*{PARTIAL}.*") if p.is_file()] if out_dir.is_dir() else []

@@ -69,7 +69,9 @@ def check_batch_track(args) -> list[batch.BatchItem]:
     options += [item for assignment in args.param for item in ("--param", assignment)]
     extras = tuple(extra for extra in batch.EXTRAS if getattr(args, extra))
     tag = uuid.uuid4().hex[:8]
-    return [batch.plan_item(path, name, out_dir, options, extras, tag) for path, name in zip(paths, names)]
+    items = [batch.plan_item(path, name, out_dir, options, extras, tag) for path, name in zip(paths, names)]
+    batch.check_outputs_apart(items, paths, out_dir)
+    return items
 
 
 def camera_input(path: Path) -> bool:

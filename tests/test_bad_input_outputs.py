@@ -92,6 +92,9 @@ CASES = [
      "--targets", None),
     ("suite-snrs-ignored", ["evaluate-suite", "--scenario", "long2012", "--methods", "mm-phd", "--snrs", "5",
                             "--out-dir", "{d}/suite"], "--snrs", None),
+    ("batch-overlay-over-input", ["batch-track", "{d}/clip.mp4", "--out-dir", "{d}", "--video"], "clip.mp4",
+     "clip.mp4"),
+    ("batch-into-frame-folder", ["batch-track", "{d}/same", "--out-dir", "{d}/same"], "--out-dir", "same"),
     ("suite-seeds-past-32-bits", ["evaluate-suite", "--tests", "5", "--seed", str(2**32 - 2), "--out-dir",
                                   "{d}/suite"], "--seed", None),
 ]
