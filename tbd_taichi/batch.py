@@ -18,6 +18,7 @@ from pathlib import Path
 
 from . import io
 from .errors import TBDError
+from .validate import apart_from_inputs
 
 SUMMARY = "summary.csv"
 SETTINGS = "batch_settings.json"  # the settings the outputs in the folder were made with
@@ -124,14 +125,12 @@ def plan_item(path: Path, name: str, out_dir: Path, track_options: list[str], ex
 
 def check_outputs_apart(items: list, paths: list, out_dir: Path) -> None:
     """No item's final output is one of the inputs (a clip in ``out_dir`` with --video would be replaced by its
-    own overlay), and no input folder of frames is ``out_dir`` (the pictures would join its frames)."""
-    inputs = {Path(p).resolve() for p in paths}
-    if out_dir.resolve() in inputs:
+    own overlay: ``validate.apart_from_inputs``), and no input folder of frames is ``out_dir`` (the pictures
+    would join its frames)."""
+    if out_dir.resolve() in {Path(p).resolve() for p in paths}:
         raise TBDError(f"--out-dir {out_dir} is an input folder of frames; give another folder")
-    for item in items:
-        for _, final in item.outputs:
-            if Path(final).resolve() in inputs:
-                raise TBDError(f"--out-dir {out_dir}: {final} would overwrite that input; give another folder")
+    apart_from_inputs([("--out-dir", final) for item in items for _, final in item.outputs],
+                      [("input", p) for p in paths])
 
 
 def remove_stale_partials(out_dir: Path) -> int:

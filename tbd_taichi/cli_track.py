@@ -214,8 +214,8 @@ def plan_track(args) -> TrackPlan | None:
                "plot": validate.output_path("--plot", args.plot, validate.PLOT_OUT) if args.plot else None,
                "diagnostics": validate.output_path("--diagnostics", args.diagnostics, (".csv",))
                if args.diagnostics else None}
-    validate.apart_from_inputs({"--out": out, **{f"--{k}": v for k, v in outputs.items()}},
-                               {"INPUT": args.input, "--truth": args.truth}, io.IMAGE_SUFFIXES)
+    validate.apart_from_inputs([("--out", out)] + [(f"--{k}", v) for k, v in outputs.items()],
+                               [("INPUT", args.input), ("--truth", args.truth)], io.IMAGE_SUFFIXES)
     truth = tables.read_any_truth(validate.input_file("--truth", args.truth)) if args.truth else None
     source = io.open_frames(args.input)
     validate.frame_shape(f"{source.name}: frame size", source.shape)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ParameterError
-from .tables import TRUTH_DTYPE, make_table
+from .tables import TRUTH_DTYPE, in_image, make_table
 
 MAX_TRIES = 500
 PSF_RADIUS_SIGMAS = 4.0  # render the PSF out to 4Σ; beyond it h < 4e-4 of the peak
@@ -68,9 +68,7 @@ def ncv_trajectory(rng: np.random.Generator, start: np.ndarray, n_frames: int, q
 def in_view(states: np.ndarray, shape: tuple[int, int], margin: float) -> np.ndarray:
     """Per row of ``states`` ([x, vx, y, vy, I] …): the centre at least ``margin`` px inside the image (pixel
     centres at integers, so the image spans [−0.5, W − 0.5) × [−0.5, H − 0.5))."""
-    h, w = shape
-    x, y = states[:, 0], states[:, 2]
-    return (x >= margin - 0.5) & (x < w - 0.5 - margin) & (y >= margin - 0.5) & (y < h - 0.5 - margin)
+    return in_image(states[:, 0], states[:, 2], shape, margin)
 
 
 def _start_stay(rng, shape, n_frames, speed, intensity, margin):

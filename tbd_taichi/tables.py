@@ -183,6 +183,13 @@ def read_any_truth(path) -> tuple[str, np.ndarray]:
     return "points", read_truth(path)
 
 
+def in_image(x, y, shape, margin: float = 0.0):
+    """Whether (x, y) lies at least ``margin`` px inside frames of ``shape`` (H, W): pixel centres at integers, so
+    the image spans [−0.5, W − 0.5) × [−0.5, H − 0.5) (x = column, y = row).  Scalars or arrays."""
+    h, w = shape
+    return (x >= margin - 0.5) & (x < w - 0.5 - margin) & (y >= margin - 0.5) & (y < h - 0.5 - margin)
+
+
 def rows_inside(kind: str, table: np.ndarray, shape) -> int:
     """How many rows of a truth ``table`` (``kind`` "points" or "boxes", as :func:`read_any_truth` gives) lie in
     frames of ``shape`` (H, W): a point within the pixels' extent [−0.5, W − 0.5) × [−0.5, H − 0.5), a box
@@ -192,5 +199,5 @@ def rows_inside(kind: str, table: np.ndarray, shape) -> int:
         inside = (table["x"] + table["w"] > -0.5) & (table["x"] < w - 0.5) & \
             (table["y"] + table["h"] > -0.5) & (table["y"] < h - 0.5)
     else:
-        inside = (table["x"] >= -0.5) & (table["x"] < w - 0.5) & (table["y"] >= -0.5) & (table["y"] < h - 0.5)
+        inside = in_image(table["x"], table["y"], shape)
     return int(np.count_nonzero(inside))

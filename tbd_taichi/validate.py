@@ -31,10 +31,15 @@ def whole(name: str, value, low: int = 0, high: int | None = None) -> int:
     return int(value)
 
 
+def finite_number(value) -> bool:
+    """Whether ``value`` is a finite real number (a Python or NumPy int or float; not a bool)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and \
+        math.isfinite(value)
+
+
 def positive(name: str, value, low: float = 0.0, closed: bool = False) -> float:
     """``value`` as a finite float > low (≥ low with ``closed``)."""
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and math.isfinite(value) and \
-        (value >= low if closed else value > low)
+    ok = finite_number(value) and (value >= low if closed else value > low)
     if not ok:
         raise ParameterError(f"{name} must be a finite number {'≥' if closed else '>'} {low:g}, got {value!r}".lstrip())
     return float(value)
@@ -42,8 +47,7 @@ def positive(name: str, value, low: float = 0.0, closed: bool = False) -> float:
 
 def within(name: str, value, low: float, high: float) -> float:
     """``value`` as a finite float in [low, high]."""
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and \
-        math.isfinite(value) and low <= value <= high
+    ok = finite_number(value) and low <= value <= high
     if not ok:
         raise ParameterError(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}".lstrip())
     return float(value)
@@ -73,19 +77,22 @@ def output_path(name: str, path, suffixes: tuple[str, ...] | None = None) -> Pat
     return path
 
 
-def apart_from_inputs(outputs: dict, inputs: dict, frame_suffixes: tuple = ()) -> None:
-    """Refuse outputs ({flag: path or None}) that would overwrite an input ({name: path or None}: a file, or a
-    folder whose ``frame_suffixes`` files are read as frames) or each other."""
+def apart_from_inputs(outputs, inputs, frame_suffixes: tuple = ()) -> None:
+    """Refuse outputs ((flag, path or None) pairs) that would overwrite an input ((name, path or None) pairs: a
+    file, or a folder whose ``frame_suffixes`` files are read as frames) or each other (set look-ups: a batch's
+    thousands of inputs cost one pass)."""
+    sources = {Path(p).resolve(): name for name, p in inputs if p is not None}
+    folders = {source for source in sources if source.is_dir()}
     seen = {}
-    for flag, path in ((f, Path(p).resolve()) for f, p in outputs.items() if p is not None):
+    for flag, path in ((f, Path(p).resolve()) for f, p in outputs if p is not None):
         if path in seen:
             raise InputError(f"{flag} {path} is the {seen[path]} file too; give two paths")
         seen[path] = flag
-        for name, source in ((n, Path(i).resolve()) for n, i in inputs.items() if i is not None):
-            if path == source:
-                raise InputError(f"{flag} {path} is the {name} file; writing it would overwrite the input")
-            if source.is_dir() and path.parent == source and path.suffix.lower() in frame_suffixes:
-                raise InputError(f"{flag} {path} lies in the {name} folder with its frames; give a path outside it")
+        if path in sources:
+            raise InputError(f"{flag} {path} is the {sources[path]} file; writing it would overwrite the input")
+        if path.parent in folders and path.suffix.lower() in frame_suffixes:
+            raise InputError(f"{flag} {path} lies in the {sources[path.parent]} folder with its frames; give a path "
+                             "outside it")
 
 
 def input_file(name: str, path) -> Path:

@@ -21,6 +21,7 @@ from collections import defaultdict
 
 import numpy as np
 
+from ...tables import in_image
 from .confirmation import near_any
 
 FIT_POINTS = 20  # L: path points the line is fitted to
@@ -39,11 +40,10 @@ def backfilled(path, frames: int, shape: tuple, fit: int = FIT_POINTS) -> list:
     f = np.array([row[0] for row in head], np.float64) - f0
     vx, x0 = np.polyfit(f, [row[1] for row in head], 1)
     vy, y0 = np.polyfit(f, [row[2] for row in head], 1)
-    h, w = shape
     rows = []
     for g in range(max(f0 - frames, 0), f0):
         x, y = x0 + (g - f0) * vx, y0 + (g - f0) * vy
-        if -0.5 <= x < w - 0.5 and -0.5 <= y < h - 0.5:
+        if in_image(x, y, shape):
             rows.append((g, float(x), float(y), float(vx), float(vy), inten, conf))
     return rows
 

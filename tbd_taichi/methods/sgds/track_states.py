@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...tables import in_image
 from .confirmation import (LOST_FRAMES, held_compact, icef_of_log_ratio, log_weight_ratio, update_confidence,
                            windowed_icef)
 
@@ -78,8 +79,7 @@ class TrackStates:
                              self.ratios.window, icef_ratio)
         self.confidence = update_confidence(self.confidence, icef, scefs)
         self.xy[finite], self.last_frame[finite] = xy[finite], frame
-        x, y = self.xy[:, 0], self.xy[:, 1]
-        inside = (-0.5 <= x) & (x < w - 0.5) & (-0.5 <= y) & (y < h - 0.5)
+        inside = in_image(self.xy[:, 0], self.xy[:, 1], (h, w))
         ended = (self.confidence < t_ft) | (self.without_e >= LOST_FRAMES) | ~inside
         one = (self.confidence == 1.0) & ~ended  # an ended track's row is not read again
         self.n_rt += one
